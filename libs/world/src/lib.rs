@@ -1,0 +1,31 @@
+//! The world both physics and estimator know: the robot's description, scenarios and polygon geometry.
+
+mod geometry;
+mod rng;
+mod robot;
+mod scenario;
+
+pub use geometry::{Polygon, PolygonError, point_segment_distance, ray_segment, segments_intersect, signed_area};
+pub use rng::Rng;
+pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
+pub use scenario::{
+    BUILTIN_NAMES, Localization, ObjectShape, ObjectSpec, Pose, RobotSetup, Scenario,
+    ScenarioLoadError, TaskKind, TaskSpec,
+};
+
+/// 1-based line number of byte offset `offset` in `text`.
+pub(crate) fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+/// Angle wrapped into (-pi, pi].
+pub fn wrap_angle(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    let mut r = a % t;
+    if r <= -std::f64::consts::PI {
+        r += t;
+    } else if r > std::f64::consts::PI {
+        r -= t;
+    }
+    r
+}

@@ -1,0 +1,596 @@
+use std::path::Path;
+
+use glam::DVec2;
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::geometry::{Polygon, PolygonError};
+use crate::line_of;
+
+/// A pose in the plane, SI units: metres and radians (counter-clockwise, 0 = +x).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Pose {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+impl Pose {
+    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
+        Self { x, y, theta }
+    }
+
+    pub fn position(&self) -> DVec2 {
+        DVec2::new(self.x, self.y)
+    }
+}
+
+/// The object's shape in its own frame, centred on its centroid.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ObjectShape {
+    Polygon(Polygon),
+    Circle { radius: f64 },
+}
+
+impl ObjectShape {
+    /// Largest distance from the centroid to the border.
+    pub fn radius(&self) -> f64 {
+        match self {
+            Self::Polygon(p) => p.radius(),
+            Self::Circle { radius } => *radius,
+        }
+    }
+
+    /// Area of the footprint, m^2.
+    pub fn area(&self) -> f64 {
+        match self {
+            Self::Polygon(p) => p.area(),
+            Self::Circle { radius } => std::f64::consts::PI * radius * radius,
+        }
+    }
+
+    /// Whether a point of the object frame is inside the shape.
+    pub fn contains(&self, p: DVec2) -> bool {
+        match self {
+            Self::Polygon(poly) => poly.contains(p),
+            Self::Circle { radius } => p.length() <= *radius,
+        }
+    }
+
+    /// Rotational symmetry: the shape maps onto itself when turned by 360/order degrees.
+    /// 0 for a circle (every angle), 1 for no symmetry.
+    pub fn symmetry_order(&self) -> u32 {
+        match self {
+            Self::Circle { .. } => 0,
+            Self::Polygon(p) => {
+                let tol = 1e-3 * p.radius().max(1e-9);
+                (2..=12u32)
+                    .rev()
+                    .find(|&k| {
+                        let rot = DVec2::from_angle(std::f64::consts::TAU / k as f64);
+                        p.vertices().iter().all(|v| {
+                            let r = rot.rotate(*v);
+                            p.vertices().iter().any(|w| (*w - r).length() < tol)
+                        })
+                    })
+                    .unwrap_or(1)
+            }
+        }
+    }
+}
+
+/// The object to push and where it starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectSpec {
+    pub shape: ObjectShape,
+    pub mass: f64,
+    /// Coulomb coefficient between object and floor.
+    pub floor_friction: f64,
+    /// Coulomb coefficient between robot and object.
+    pub contact_friction: f64,
+    pub start: Pose,
+}
+
+/// The overhead camera's periodic fix of the robot's pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Localization {
+    pub period_s: f64,
+    pub noise_m: f64,
+    pub noise_rad: f64,
+}
+
+/// The robot's start and the noise of its senses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSetup {
+    pub start: Pose,
+    /// Relative standard deviation of each wheel's travel per odometry update.
+    pub odometry_noise: f64,
+    /// `None` when the scenario turns the overhead fix off.
+    pub localization: Option<Localization>,
+    /// Multiplies the response table's noise.
+    pub ir_noise_scale: f64,
+}
+
+/// What the run is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TaskKind {
+    Learn,
+    Trajectory,
+    Place,
+}
+
+impl TaskKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Learn => "learn",
+            Self::Trajectory => "trajectory",
+            Self::Place => "place",
+        }
+    }
+}
+
+/// The task of a scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskSpec {
+    pub kind: TaskKind,
+    pub goal: Pose,
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+    /// Polyline of a trajectory task, metres (world frame).
+    pub path: Vec<DVec2>,
+    pub max_pushes: u32,
+    pub seed: u64,
+}
+
+/// A whole scenario: object, robot and task.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    pub name: String,
+    /// Where it came from: a file path, or `built-in`.
+    pub source: String,
+    pub object: ObjectSpec,
+    pub robot: RobotSetup,
+    pub task: TaskSpec,
+}
+
+/// Why a scenario could not be loaded. Every variant names the file; parse and validation
+/// errors name the line.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioLoadError {
+    #[error("cannot read scenario `{path}`: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}: {message}")]
+    Invalid {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error(
+        "`{0}` is neither a built-in scenario ({builtins}) nor a file",
+        builtins = BUILTIN_NAMES.join(", ")
+    )]
+    Unknown(String),
+}
+
+/// Names of the built-in scenarios.
+pub const BUILTIN_NAMES: [&str; 4] = ["square", "triangle", "lshape", "circle"];
+
+const BUILTINS: [(&str, &str); 4] = [
+    ("square", include_str!("../scenarios/square.toml")),
+    ("triangle", include_str!("../scenarios/triangle.toml")),
+    ("lshape", include_str!("../scenarios/lshape.toml")),
+    ("circle", include_str!("../scenarios/circle.toml")),
+];
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ScenarioFile {
+    name: Spanned<String>,
+    object: ObjectFile,
+    #[serde(default)]
+    robot: Option<RobotFile>,
+    #[serde(default)]
+    task: Option<TaskFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObjectFile {
+    shape: Spanned<String>,
+    #[serde(default)]
+    vertices_mm: Option<Spanned<Vec<[f64; 2]>>>,
+    #[serde(default)]
+    radius_mm: Option<Spanned<f64>>,
+    mass_kg: Spanned<f64>,
+    floor_friction: Spanned<f64>,
+    contact_friction: Spanned<f64>,
+    #[serde(default)]
+    start: Option<Spanned<PoseFile>>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(deny_unknown_fields)]
+struct PoseFile {
+    x_mm: f64,
+    y_mm: f64,
+    theta_deg: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RobotFile {
+    #[serde(default)]
+    start: Option<Spanned<PoseFile>>,
+    #[serde(default)]
+    odometry_noise: Option<Spanned<f64>>,
+    #[serde(default)]
+    localization: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    ir_noise_scale: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LocalizationFile {
+    period_s: f64,
+    noise_mm: f64,
+    noise_deg: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToleranceFile {
+    mm: f64,
+    deg: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TaskFile {
+    kind: Spanned<String>,
+    #[serde(default)]
+    goal: Option<Spanned<PoseFile>>,
+    #[serde(default)]
+    tolerance: Option<Spanned<ToleranceFile>>,
+    #[serde(default)]
+    path_mm: Option<Spanned<Vec<[f64; 2]>>>,
+    #[serde(default)]
+    max_pushes: Option<Spanned<i64>>,
+    #[serde(default)]
+    seed: Option<Spanned<i64>>,
+}
+
+/// Defaults of the robot and task sections (benchmarks.md, robot-and-world.md).
+const DEFAULT_ROBOT_START: Pose = Pose::new(-0.25, 0.0, 0.0);
+const DEFAULT_ODOMETRY_NOISE: f64 = 0.005;
+const DEFAULT_LOCALIZATION: Localization = Localization {
+    period_s: 1.0,
+    noise_m: 0.001,
+    noise_rad: 0.5 * std::f64::consts::PI / 180.0,
+};
+
+impl Scenario {
+    /// A built-in scenario by name.
+    pub fn builtin(name: &str) -> Option<Scenario> {
+        BUILTINS.iter().find(|(n, _)| *n == name).map(|(n, text)| {
+            Self::parse(text, &format!("<built-in {n}>"))
+                .expect("built-in scenarios are valid")
+        })
+    }
+
+    /// A built-in name, or else a path to a scenario file.
+    pub fn resolve(name_or_file: &str) -> Result<Scenario, ScenarioLoadError> {
+        if let Some(s) = Self::builtin(name_or_file) {
+            return Ok(s);
+        }
+        let path = Path::new(name_or_file);
+        if path.exists() {
+            return Self::load(path);
+        }
+        Err(ScenarioLoadError::Unknown(name_or_file.to_owned()))
+    }
+
+    /// Loads and validates a scenario file whole.
+    pub fn load(path: &Path) -> Result<Scenario, ScenarioLoadError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioLoadError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let mut s = Self::parse(&text, &path.display().to_string())?;
+        s.source = path.display().to_string();
+        Ok(s)
+    }
+
+    /// Parses and validates scenario text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Scenario, ScenarioLoadError> {
+        let err = |span: std::ops::Range<usize>, message: String| ScenarioLoadError::Invalid {
+            path: origin.to_owned(),
+            line: line_of(text, span.start),
+            message,
+        };
+        let file: ScenarioFile = toml::from_str(text).map_err(|e| {
+            err(
+                e.span().unwrap_or(0..0),
+                e.message().trim_end().replace('\n', "; "),
+            )
+        })?;
+
+        let name = file.name.get_ref().trim().to_owned();
+        if name.is_empty() {
+            return Err(err(file.name.span(), "`name` is empty".into()));
+        }
+
+        let o = &file.object;
+        let shape = match o.shape.get_ref().as_str() {
+            "polygon" => {
+                let Some(vs) = &o.vertices_mm else {
+                    return Err(err(o.shape.span(), "a polygon needs `vertices_mm`".into()));
+                };
+                if o.radius_mm.is_some() {
+                    return Err(err(o.shape.span(), "a polygon takes no `radius_mm`".into()));
+                }
+                let points = vs
+                    .get_ref()
+                    .iter()
+                    .map(|p| DVec2::new(p[0], p[1]) * 1e-3)
+                    .collect();
+                let poly = Polygon::new(points).map_err(|e| {
+                    let msg = match e {
+                        PolygonError::NotFinite(i) => format!("vertex {i} is not a finite number"),
+                        other => other.to_string(),
+                    };
+                    err(vs.span(), format!("`vertices_mm`: {msg}"))
+                })?;
+                ObjectShape::Polygon(poly.centred())
+            }
+            "circle" => {
+                let Some(r) = &o.radius_mm else {
+                    return Err(err(o.shape.span(), "a circle needs `radius_mm`".into()));
+                };
+                if o.vertices_mm.is_some() {
+                    return Err(err(o.shape.span(), "a circle takes no `vertices_mm`".into()));
+                }
+                positive(r, "radius_mm", &err)?;
+                ObjectShape::Circle {
+                    radius: *r.get_ref() * 1e-3,
+                }
+            }
+            other => {
+                return Err(err(
+                    o.shape.span(),
+                    format!("unknown shape `{other}`; expected `polygon` or `circle`"),
+                ));
+            }
+        };
+        positive(&o.mass_kg, "mass_kg", &err)?;
+        non_negative(&o.floor_friction, "floor_friction", &err)?;
+        non_negative(&o.contact_friction, "contact_friction", &err)?;
+        let object = ObjectSpec {
+            shape,
+            mass: *o.mass_kg.get_ref(),
+            floor_friction: *o.floor_friction.get_ref(),
+            contact_friction: *o.contact_friction.get_ref(),
+            start: match &o.start {
+                Some(p) => pose(p, "start", &err)?,
+                None => Pose::default(),
+            },
+        };
+
+        let robot = match &file.robot {
+            None => RobotSetup {
+                start: DEFAULT_ROBOT_START,
+                odometry_noise: DEFAULT_ODOMETRY_NOISE,
+                localization: Some(DEFAULT_LOCALIZATION),
+                ir_noise_scale: 1.0,
+            },
+            Some(r) => RobotSetup {
+                start: match &r.start {
+                    Some(p) => pose(p, "start", &err)?,
+                    None => DEFAULT_ROBOT_START,
+                },
+                odometry_noise: match &r.odometry_noise {
+                    Some(v) => *non_negative(v, "odometry_noise", &err)?,
+                    None => DEFAULT_ODOMETRY_NOISE,
+                },
+                localization: match &r.localization {
+                    None => Some(DEFAULT_LOCALIZATION),
+                    Some(v) => localization(v, &err)?,
+                },
+                ir_noise_scale: match &r.ir_noise_scale {
+                    Some(v) => *non_negative(v, "ir_noise_scale", &err)?,
+                    None => 1.0,
+                },
+            },
+        };
+
+        let task = match &file.task {
+            None => TaskSpec {
+                kind: TaskKind::Learn,
+                goal: Pose::default(),
+                tolerance_m: 0.01,
+                tolerance_rad: 10f64.to_radians(),
+                path: Vec::new(),
+                max_pushes: 150,
+                seed: 7,
+            },
+            Some(t) => task(t, &err)?,
+        };
+
+        Ok(Scenario {
+            name,
+            source: "built-in".into(),
+            object,
+            robot,
+            task,
+        })
+    }
+}
+
+type ErrFn<'a> = dyn Fn(std::ops::Range<usize>, String) -> ScenarioLoadError + 'a;
+
+fn positive<'v>(v: &'v Spanned<f64>, key: &str, err: &ErrFn) -> Result<&'v f64, ScenarioLoadError> {
+    let x = *v.get_ref();
+    if x.is_finite() && x > 0.0 {
+        Ok(v.get_ref())
+    } else {
+        Err(err(v.span(), format!("`{key}` must be a positive number, got {x}")))
+    }
+}
+
+fn non_negative<'v>(
+    v: &'v Spanned<f64>,
+    key: &str,
+    err: &ErrFn,
+) -> Result<&'v f64, ScenarioLoadError> {
+    let x = *v.get_ref();
+    if x.is_finite() && x >= 0.0 {
+        Ok(v.get_ref())
+    } else {
+        Err(err(v.span(), format!("`{key}` must be a non-negative number, got {x}")))
+    }
+}
+
+fn pose(p: &Spanned<PoseFile>, key: &str, err: &ErrFn) -> Result<Pose, ScenarioLoadError> {
+    let v = p.get_ref();
+    if ![v.x_mm, v.y_mm, v.theta_deg].iter().all(|x| x.is_finite()) {
+        return Err(err(p.span(), format!("`{key}` holds a number that is not finite")));
+    }
+    Ok(Pose::new(v.x_mm * 1e-3, v.y_mm * 1e-3, v.theta_deg.to_radians()))
+}
+
+fn localization(
+    v: &Spanned<toml::Value>,
+    err: &ErrFn,
+) -> Result<Option<Localization>, ScenarioLoadError> {
+    match v.get_ref() {
+        toml::Value::String(s) if s == "off" => Ok(None),
+        toml::Value::String(s) => Err(err(
+            v.span(),
+            format!("`localization` is `{s}`; expected \"off\" or {{ period_s, noise_mm, noise_deg }}"),
+        )),
+        other => {
+            let l: LocalizationFile = other
+                .clone()
+                .try_into()
+                .map_err(|e: toml::de::Error| err(v.span(), format!("`localization`: {}", e.message())))?;
+            if !(l.period_s.is_finite() && l.period_s > 0.0) {
+                return Err(err(v.span(), format!("`localization.period_s` must be positive, got {}", l.period_s)));
+            }
+            if !(l.noise_mm.is_finite() && l.noise_mm >= 0.0 && l.noise_deg.is_finite() && l.noise_deg >= 0.0) {
+                return Err(err(v.span(), "`localization` noise must be non-negative and finite".into()));
+            }
+            Ok(Some(Localization {
+                period_s: l.period_s,
+                noise_m: l.noise_mm * 1e-3,
+                noise_rad: l.noise_deg.to_radians(),
+            }))
+        }
+    }
+}
+
+fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
+    let kind = match t.kind.get_ref().as_str() {
+        "learn" => TaskKind::Learn,
+        "trajectory" => TaskKind::Trajectory,
+        "place" => TaskKind::Place,
+        other => {
+            return Err(err(
+                t.kind.span(),
+                format!("unknown task kind `{other}`; expected `learn`, `trajectory` or `place`"),
+            ));
+        }
+    };
+    let goal = match &t.goal {
+        Some(g) => pose(g, "goal", err)?,
+        None if kind == TaskKind::Place => {
+            return Err(err(t.kind.span(), "a `place` task needs a `goal`".into()));
+        }
+        None => Pose::default(),
+    };
+    let (tolerance_m, tolerance_rad) = match &t.tolerance {
+        Some(tol) => {
+            let v = tol.get_ref();
+            if !(v.mm.is_finite() && v.mm > 0.0 && v.deg.is_finite() && v.deg > 0.0) {
+                return Err(err(tol.span(), "`tolerance` must hold positive `mm` and `deg`".into()));
+            }
+            (v.mm * 1e-3, v.deg.to_radians())
+        }
+        None => (0.01, 10f64.to_radians()),
+    };
+    let path = match &t.path_mm {
+        Some(p) => {
+            if p.get_ref().len() < 2 {
+                return Err(err(p.span(), "`path_mm` needs at least 2 points".into()));
+            }
+            if p.get_ref().len() > 32 {
+                return Err(err(p.span(), "`path_mm` holds more than 32 points".into()));
+            }
+            if p.get_ref().iter().flatten().any(|x| !x.is_finite()) {
+                return Err(err(p.span(), "`path_mm` holds a number that is not finite".into()));
+            }
+            p.get_ref().iter().map(|q| DVec2::new(q[0], q[1]) * 1e-3).collect()
+        }
+        None if kind == TaskKind::Trajectory => {
+            return Err(err(t.kind.span(), "a `trajectory` task needs `path_mm`".into()));
+        }
+        None => Vec::new(),
+    };
+    let max_pushes = match &t.max_pushes {
+        Some(m) if *m.get_ref() > 0 && *m.get_ref() <= u32::MAX as i64 => *m.get_ref() as u32,
+        Some(m) => {
+            return Err(err(m.span(), format!("`max_pushes` must be positive, got {}", m.get_ref())));
+        }
+        None => 150,
+    };
+    let seed = match &t.seed {
+        Some(s) if *s.get_ref() >= 0 => *s.get_ref() as u64,
+        Some(s) => return Err(err(s.span(), format!("`seed` must be non-negative, got {}", s.get_ref()))),
+        None => 7,
+    };
+    Ok(TaskSpec {
+        kind,
+        goal,
+        tolerance_m,
+        tolerance_rad,
+        path,
+        max_pushes,
+        seed,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_loads_with_the_spec_figures() {
+        for name in BUILTIN_NAMES {
+            let s = Scenario::builtin(name).unwrap();
+            assert_eq!(s.name, name);
+            assert_eq!(s.object.mass, 0.1);
+            assert_eq!(s.object.floor_friction, 0.4);
+            assert_eq!(s.object.contact_friction, 0.3);
+            assert_eq!(s.robot.odometry_noise, 0.005);
+            assert!(s.robot.localization.is_some());
+        }
+        let tri = Scenario::builtin("triangle").unwrap();
+        // Equilateral, 100 mm side: area sqrt(3)/4 * a^2.
+        assert!((tri.object.shape.area() - 3f64.sqrt() / 4.0 * 0.01).abs() < 1e-12);
+        assert_eq!(tri.object.shape.symmetry_order(), 3);
+        let l = Scenario::builtin("lshape").unwrap();
+        assert!((l.object.shape.area() - 4.0 * 0.03 * 0.03).abs() < 1e-12);
+        assert_eq!(l.object.shape.symmetry_order(), 1);
+        assert_eq!(Scenario::builtin("square").unwrap().object.shape.symmetry_order(), 4);
+        assert_eq!(Scenario::builtin("circle").unwrap().object.shape.symmetry_order(), 0);
+    }
+
+    #[test]
+    fn polygons_are_centred_on_their_centroid() {
+        let l = Scenario::builtin("lshape").unwrap();
+        let ObjectShape::Polygon(p) = &l.object.shape else { panic!() };
+        assert!(p.centroid().length() < 1e-12);
+    }
+}

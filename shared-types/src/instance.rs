@@ -1,0 +1,395 @@
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use iceoryx2::config::Config;
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+
+use crate::payloads::{GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task};
+
+/// Longest instance name: root path plus prefix must stay under about 60 characters, since
+/// iceoryx2 derives Unix socket paths from them.
+pub const MAX_INSTANCE_NAME_LEN: usize = 20;
+
+/// Environment variable that moves the folder holding every instance's iceoryx2 root.
+pub const ROOT_ENV: &str = "AGP_IOX2_ROOT";
+
+/// Why an instance name was refused.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum InstanceNameError {
+    Empty,
+    TooLong { len: usize },
+    BadCharacter { c: char },
+}
+
+impl std::fmt::Display for InstanceNameError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Empty => write!(f, "instance name is empty"),
+            Self::TooLong { len } => write!(
+                f,
+                "instance name is {len} characters long; at most {MAX_INSTANCE_NAME_LEN} fit in iceoryx2's socket paths"
+            ),
+            Self::BadCharacter { c } => write!(
+                f,
+                "instance name holds `{c}`; use lowercase letters, digits, `-` and `_`"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for InstanceNameError {}
+
+/// Names of the services of one instance. Every topic is paired with an event service
+/// (`<topic>.ev`) its publisher notifies after each send, so readers block on a WaitSet
+/// instead of polling.
+pub struct ServiceNames;
+
+impl ServiceNames {
+    pub const IR_FRAMES: &'static str = "agp/ir_frames";
+    pub const GROUND_TRUTH: &'static str = "agp/ground_truth";
+    pub const MOTOR_COMMANDS: &'static str = "agp/motor_commands";
+    pub const RESETS: &'static str = "agp/resets";
+    pub const ESTIMATES: &'static str = "agp/estimates";
+    pub const GRIDS: &'static str = "agp/grids";
+    pub const TASK: &'static str = "agp/task";
+
+    /// The event service paired with a topic.
+    pub fn event_of(topic: &str) -> String {
+        format!("{topic}.ev")
+    }
+}
+
+/// One running pipeline's iceoryx2 world: its name, its explicit config (prefix and root
+/// folder of its own, nothing loaded from files) and the services it uses.
+///
+/// Every process of a pipeline builds the same `Instance` from the name the supervisor
+/// passes it; two instances of different names share no file.
+#[derive(Debug, Clone)]
+pub struct Instance {
+    name: String,
+    config: Config,
+    root: PathBuf,
+}
+
+/// Where instance roots live unless [`ROOT_ENV`] says otherwise.
+const DEFAULT_ROOT_BASE: &str = "/tmp/agp";
+
+impl Instance {
+    /// Builds the config of instance `name`: prefix `agp_<name>_`, root folder
+    /// `<base>/<name>/` (base `/tmp/agp`, or `$AGP_IOX2_ROOT`).
+    pub fn new(name: &str) -> Result<Self, InstanceNameError> {
+        Self::validate_name(name)?;
+        let base = std::env::var_os(ROOT_ENV)
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(DEFAULT_ROOT_BASE));
+        let root = base.join(name);
+        let mut config = Config::default();
+        let mut root_str = root.to_string_lossy().into_owned();
+        root_str.push('/');
+        let iox_root = iceoryx2::prelude::Path::new(root_str.as_bytes())
+            .expect("a validated instance name gives a valid root path");
+        config.global.set_root_path(&iox_root);
+        config.global.prefix = FileName::new(Self::prefix_of(name).as_bytes())
+            .expect("a validated instance name gives a valid prefix");
+        // A crashed process's resources are cleaned by the supervisor, which knows it died;
+        // cleaning on open stays on as a second line of defence.
+        config.global.creation_timeout = Duration::from_secs(2);
+        Ok(Self {
+            name: name.to_owned(),
+            config,
+            root,
+        })
+    }
+
+    /// Checks a name without building anything.
+    pub fn validate_name(name: &str) -> Result<(), InstanceNameError> {
+        if name.is_empty() {
+            return Err(InstanceNameError::Empty);
+        }
+        if name.len() > MAX_INSTANCE_NAME_LEN {
+            return Err(InstanceNameError::TooLong { len: name.len() });
+        }
+        if let Some(c) = name
+            .chars()
+            .find(|c| !(c.is_ascii_lowercase() || c.is_ascii_digit() || *c == '-' || *c == '_'))
+        {
+            return Err(InstanceNameError::BadCharacter { c });
+        }
+        Ok(())
+    }
+
+    fn prefix_of(name: &str) -> String {
+        format!("agp_{name}_")
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The prefix of every file of this instance in `/dev/shm`.
+    pub fn shm_prefix(&self) -> String {
+        Self::prefix_of(&self.name)
+    }
+
+    /// The instance's iceoryx2 root folder.
+    pub fn root_dir(&self) -> &Path {
+        &self.root
+    }
+
+    /// Creates a node of this instance. With `handle_signals`, iceoryx2 installs its
+    /// SIGINT/SIGTERM handler at the first wait, and the caller must poll for termination.
+    pub fn node(
+        &self,
+        node_name: &str,
+        handle_signals: bool,
+    ) -> Result<Node<ipc::Service>, NodeCreationFailure> {
+        let mut builder = NodeBuilder::new().config(&self.config);
+        if let Ok(n) = NodeName::new(node_name) {
+            builder = builder.name(&n);
+        }
+        builder
+            .signal_handling_mode(if handle_signals {
+                SignalHandlingMode::HandleTerminationRequests
+            } else {
+                SignalHandlingMode::Disabled
+            })
+            .create::<ipc::Service>()
+    }
+
+    /// Every file this instance has on the machine: its `/dev/shm` entries and, if present,
+    /// its root folder.
+    pub fn files(&self) -> Vec<PathBuf> {
+        let mut files = instance_files_in(Path::new("/dev/shm"), &self.shm_prefix());
+        if self.root.exists() {
+            files.push(self.root.clone());
+        }
+        files
+    }
+
+    /// Removes the instance's `/dev/shm` files and its root folder together. Call only when
+    /// no process of the instance is alive. Returns how many entries were removed.
+    pub fn remove_files(&self) -> std::io::Result<usize> {
+        let mut removed = 0;
+        for f in instance_files_in(Path::new("/dev/shm"), &self.shm_prefix()) {
+            match std::fs::remove_file(&f) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if self.root.exists() {
+            std::fs::remove_dir_all(&self.root)?;
+            removed += 1;
+        }
+        Ok(removed)
+    }
+
+    pub fn ir_frames(&self, node: &Node<ipc::Service>) -> Result<Topic<IrFrame>, OpenError> {
+        Topic::open(node, ServiceNames::IR_FRAMES, Qos::stream())
+    }
+
+    pub fn ground_truth(&self, node: &Node<ipc::Service>) -> Result<Topic<GroundTruth>, OpenError> {
+        Topic::open(node, ServiceNames::GROUND_TRUTH, Qos::stream())
+    }
+
+    pub fn motor_commands(
+        &self,
+        node: &Node<ipc::Service>,
+    ) -> Result<Topic<MotorCommand>, OpenError> {
+        Topic::open(node, ServiceNames::MOTOR_COMMANDS, Qos::commands())
+    }
+
+    pub fn resets(&self, node: &Node<ipc::Service>) -> Result<Topic<Reset>, OpenError> {
+        Topic::open(node, ServiceNames::RESETS, Qos::commands())
+    }
+
+    pub fn estimates(&self, node: &Node<ipc::Service>) -> Result<Topic<ObjectEstimate>, OpenError> {
+        Topic::open(node, ServiceNames::ESTIMATES, Qos::stream())
+    }
+
+    pub fn grids(&self, node: &Node<ipc::Service>) -> Result<Topic<GradientGrid>, OpenError> {
+        Topic::open(node, ServiceNames::GRIDS, Qos::grids())
+    }
+
+    pub fn task(&self, node: &Node<ipc::Service>) -> Result<Topic<Task>, OpenError> {
+        Topic::open(node, ServiceNames::TASK, Qos::latched())
+    }
+}
+
+/// Files in `dir` whose name starts with `prefix`.
+pub fn instance_files_in(dir: &Path, prefix: &str) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+        .map(|e| e.path())
+        .collect();
+    files.sort();
+    files
+}
+
+/// Quality of service of one topic. Every process opens a topic through [`Instance`], so
+/// all agree on it (iceoryx2 refuses to open a service whose settings differ).
+#[derive(Debug, Clone, Copy)]
+struct Qos {
+    history: usize,
+    buffer: usize,
+    max_publishers: usize,
+    max_subscribers: usize,
+}
+
+impl Qos {
+    /// A stream of state (frames, estimates): the latest matters; a new reader gets it at once.
+    fn stream() -> Self {
+        Self {
+            history: 1,
+            buffer: 4,
+            max_publishers: 4,
+            max_subscribers: 8,
+        }
+    }
+
+    /// Commands: every one must arrive in order. Room for old and new planner during a swap.
+    fn commands() -> Self {
+        Self {
+            history: 0,
+            buffer: 16,
+            max_publishers: 6,
+            max_subscribers: 4,
+        }
+    }
+
+    /// Gradient grids: a whole affordance set (S, Px, Py, R+, R- for three alphas), kept in
+    /// history so a late or restarted reader gets all of them.
+    fn grids() -> Self {
+        Self {
+            history: 15,
+            buffer: 15,
+            max_publishers: 4,
+            max_subscribers: 6,
+        }
+    }
+
+    /// A value set once and read by whoever comes (the task).
+    fn latched() -> Self {
+        Self {
+            history: 1,
+            buffer: 2,
+            max_publishers: 4,
+            max_subscribers: 8,
+        }
+    }
+}
+
+/// Why a topic could not be opened.
+#[derive(Debug)]
+pub enum OpenError {
+    ServiceName(String),
+    PublishSubscribe(PublishSubscribeOpenOrCreateError),
+    Event(EventOpenOrCreateError),
+}
+
+impl std::fmt::Display for OpenError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::ServiceName(n) => write!(f, "`{n}` is not a valid service name"),
+            Self::PublishSubscribe(e) => write!(f, "cannot open the topic: {e:?}"),
+            Self::Event(e) => write!(f, "cannot open the topic's event service: {e:?}"),
+        }
+    }
+}
+
+impl std::error::Error for OpenError {}
+
+/// A publish-subscribe service and its paired event service.
+pub struct Topic<T: std::fmt::Debug + ZeroCopySend + 'static> {
+    pub data: publish_subscribe::PortFactory<ipc::Service, T, ()>,
+    pub event: event::PortFactory<ipc::Service>,
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
+    fn open(node: &Node<ipc::Service>, name: &str, qos: Qos) -> Result<Self, OpenError> {
+        let data_name: ServiceName = name
+            .try_into()
+            .map_err(|_| OpenError::ServiceName(name.to_owned()))?;
+        let event_str = ServiceNames::event_of(name);
+        let event_name: ServiceName = event_str
+            .as_str()
+            .try_into()
+            .map_err(|_| OpenError::ServiceName(event_str.clone()))?;
+
+        // After a crash a service can answer "corrupted" for a moment, while its creator's
+        // files are half removed: retry a few times before giving up.
+        let mut attempt = 0;
+        let data = loop {
+            match node
+                .service_builder(&data_name)
+                .publish_subscribe::<T>()
+                .history_size(qos.history)
+                .subscriber_max_buffer_size(qos.buffer.max(qos.history))
+                .max_publishers(qos.max_publishers)
+                .max_subscribers(qos.max_subscribers)
+                .max_nodes(16)
+                .open_or_create()
+            {
+                Ok(s) => break s,
+                Err(e) if attempt < 20 && is_transient_ps(&e) => {
+                    attempt += 1;
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                Err(e) => return Err(OpenError::PublishSubscribe(e)),
+            }
+        };
+        let mut attempt = 0;
+        let event = loop {
+            match node
+                .service_builder(&event_name)
+                .event()
+                .max_notifiers(qos.max_publishers + 2)
+                .max_listeners(qos.max_subscribers)
+                .max_nodes(16)
+                .open_or_create()
+            {
+                Ok(s) => break s,
+                Err(e) if attempt < 20 && is_transient_ev(&e) => {
+                    attempt += 1;
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                Err(e) => return Err(OpenError::Event(e)),
+            }
+        };
+        Ok(Self { data, event })
+    }
+}
+
+fn is_transient_ps(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as O;
+    matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::SystemInFlux
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::ServiceInCorruptedState | O::IsMarkedForDestruction | O::HangsInCreation
+            )
+    )
+}
+
+fn is_transient_ev(e: &EventOpenOrCreateError) -> bool {
+    use iceoryx2::service::builder::event::EventOpenError as O;
+    matches!(
+        e,
+        EventOpenOrCreateError::SystemInFlux
+            | EventOpenOrCreateError::EventOpenError(
+                O::ServiceInCorruptedState | O::IsMarkedForDestruction | O::HangsInCreation
+            )
+    )
+}

@@ -1,0 +1,262 @@
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Number of IR proximity sensors on the E-puck.
+pub const IR_SENSOR_COUNT: usize = 8;
+
+/// Side of a gradient grid, in cells.
+pub const GRID_SIDE: usize = 128;
+
+/// Number of cells of a gradient grid.
+pub const GRID_CELLS: usize = GRID_SIDE * GRID_SIDE;
+
+/// Largest number of vertices of a trajectory task's polyline.
+pub const MAX_PATH_POINTS: usize = 32;
+
+/// A pose in the plane: position in metres, heading in radians (counter-clockwise, 0 = +x).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::Pose2.v1")]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+impl Pose2 {
+    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
+        Self { x, y, theta }
+    }
+}
+
+/// Index of each stamp in [`TimingHeader::stamps_ns`]: the stages a control step passes.
+pub mod stage {
+    /// physics published the IR frame
+    pub const FRAME_PUBLISHED: usize = 0;
+    /// estimator received the IR frame
+    pub const ESTIMATOR_RECEIVED: usize = 1;
+    /// estimator published the estimate derived from it
+    pub const ESTIMATE_PUBLISHED: usize = 2;
+    /// planner received the estimate
+    pub const PLANNER_RECEIVED: usize = 3;
+    /// planner published the motor command
+    pub const COMMAND_PUBLISHED: usize = 4;
+    /// physics received the command
+    pub const COMMAND_RECEIVED: usize = 5;
+    /// physics applied the command (stepped the world with it)
+    pub const COMMAND_APPLIED: usize = 6;
+    /// number of stages
+    pub const COUNT: usize = 8;
+}
+
+/// Carried by every message of the control loop: the trace id of the IR frame the message
+/// derives from, and CLOCK_MONOTONIC stamps (nanoseconds, system-wide on Linux) of each
+/// stage it passed; 0 means "not passed".
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::TimingHeader.v1")]
+pub struct TimingHeader {
+    pub trace_id: u64,
+    pub stamps_ns: [u64; stage::COUNT],
+}
+
+/// What the robot knows of itself and senses, once per physics step.
+///
+/// The IR readings and the odometry are sampled at the robot's IR rate (64 Hz on an
+/// E-puck), not at the physics step: between two samples a frame repeats the last ones, and
+/// `ir_sample` tells a fresh sample from a repeated one.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::IrFrame.v1")]
+pub struct IrFrame {
+    pub timing: TimingHeader,
+    /// The physics step this frame describes (the state after `step` steps since start).
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub sim_time_s: f64,
+    /// Incremented at every IR sample; a frame whose value did not change repeats the readings.
+    pub ir_sample: u64,
+    /// Raw readings of IR1..IR8 (0..4095, higher is closer), noise included.
+    pub ir_raw: [f32; IR_SENSOR_COUNT],
+    /// The robot's own pose by odometry alone (wheel integration, drift included): it starts
+    /// at the robot's true pose and at each reset, then drifts. Fusing it with `fix` is the
+    /// reader's business.
+    pub odometry: Pose2,
+    /// Incremented at every overhead pose fix; 0 = never fixed (or the fix is off).
+    pub fix_seq: u64,
+    /// The last overhead fix of the robot's pose (world frame, noise included).
+    pub fix: Pose2,
+    /// Incremented by every reset physics applied.
+    pub reset_seq: u64,
+    /// The planner epoch whose commands physics applies.
+    pub active_epoch: u64,
+}
+
+/// Wheel speeds for one control step.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::MotorCommand.v1")]
+pub struct MotorCommand {
+    pub timing: TimingHeader,
+    /// The step of the IR frame this command answers; in lockstep physics applies it to
+    /// advance from `step` to `step + 1`.
+    pub step: u64,
+    /// The epoch of the planner that sent it; physics ignores other epochs.
+    pub epoch: u64,
+    /// Left and right wheel surface speeds, m/s (clamped to the robot's maximum by physics).
+    pub left_mps: f64,
+    pub right_mps: f64,
+}
+
+/// Puts the world in a known state: object and robot poses, and odometry reset to the
+/// robot's true pose. Applied by physics between two steps.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::Reset.v1")]
+pub struct Reset {
+    /// Chosen by the sender, echoed in [`IrFrame::reset_seq`] once applied.
+    pub seq: u64,
+    pub object: Pose2,
+    pub robot: Pose2,
+}
+
+/// The true state of the world: for evaluation, the probe and the `oracle` planner only.
+/// The estimator and the other planners never read it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::GroundTruth.v1")]
+pub struct GroundTruth {
+    pub step: u64,
+    pub sim_time_s: f64,
+    pub robot: Pose2,
+    pub object: Pose2,
+    /// 1 while the robot body touches the object.
+    pub contact: u8,
+    pub _pad: [u8; 7],
+}
+
+/// The estimator's belief about the object, in the robot's odometry frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::ObjectEstimate.v1")]
+pub struct ObjectEstimate {
+    pub timing: TimingHeader,
+    /// The step of the IR frame this estimate derives from.
+    pub step: u64,
+    pub pose: Pose2,
+    /// Standard deviations of the pose, metres and radians.
+    pub sigma_xy: f64,
+    pub sigma_theta: f64,
+    /// 1 if the pose is valid (the object has been found).
+    pub valid: u8,
+    /// 1 while contact with the object is inferred from the IR readings.
+    pub contact: u8,
+    pub _pad: [u8; 6],
+    /// The inferred contact point (odometry frame), valid when `contact` is 1.
+    pub contact_point: [f64; 2],
+    /// Bumped each time a new set of gradient grids is published.
+    pub grids_seq: u64,
+}
+
+/// Which component of an affordance gradient a grid holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum GridKind {
+    /// S: probability that the object's border lies at a cell.
+    Shape = 0,
+    /// P, x component: where the centroid moves (m) when pushed from the cell towards the centre.
+    PositionX = 1,
+    /// P, y component.
+    PositionY = 2,
+    /// R+: counter-clockwise rotation (rad) of a push from the cell.
+    RotationPos = 3,
+    /// R-: clockwise rotation (rad, stored negative) of a push from the cell.
+    RotationNeg = 4,
+}
+
+impl GridKind {
+    pub const ALL: [GridKind; 5] = [
+        GridKind::Shape,
+        GridKind::PositionX,
+        GridKind::PositionY,
+        GridKind::RotationPos,
+        GridKind::RotationNeg,
+    ];
+
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == v)
+    }
+}
+
+/// Header of a gradient grid: what it holds and where its cells are.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::GridHeader.v1")]
+pub struct GridHeader {
+    /// Bumped each time the estimator publishes a new set of grids.
+    pub seq: u64,
+    /// A [`GridKind`] as u32.
+    pub kind: u32,
+    /// The push direction's deviation from the centroid, degrees (0, +15, -15).
+    pub alpha_deg: f32,
+    /// Side of a cell, metres.
+    pub cell_size_m: f32,
+    /// Number of cells along x and y (both [`GRID_SIDE`]).
+    pub width: u32,
+    pub height: u32,
+    pub _pad: u32,
+    /// Object-frame coordinates (metres) of the corner of cell (0, 0): cell (i, j) covers
+    /// `origin + (i, j) * cell_size` to `origin + (i + 1, j + 1) * cell_size`.
+    pub origin_x_m: f64,
+    pub origin_y_m: f64,
+}
+
+/// One 128 x 128 f32 gradient grid, row-major (`cells[j * width + i]`, j along y), written
+/// once into the loaned sample and read in place.
+#[derive(Debug, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::GradientGrid.v1")]
+pub struct GradientGrid {
+    pub header: GridHeader,
+    pub cells: [f32; GRID_CELLS],
+}
+
+/// The task a run pursues.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum TaskKind {
+    Learn = 0,
+    Trajectory = 1,
+    Place = 2,
+}
+
+/// The task, as the supervisor hands it to the planner.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::Task.v1")]
+pub struct Task {
+    /// A [`TaskKind`] as u32.
+    pub kind: u32,
+    pub path_len: u32,
+    pub goal: Pose2,
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+    /// Polyline of a trajectory task (world frame, metres); the first `path_len` are used.
+    pub path: [[f64; 2]; MAX_PATH_POINTS],
+    pub max_pushes: u32,
+    pub _pad: u32,
+    pub seed: u64,
+}
+
+const _: () = {
+    use core::mem::{align_of, size_of};
+    assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
+    assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
+    assert!(size_of::<IrFrame>() == 72 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
+    assert!(size_of::<MotorCommand>() == 72 + 32 && align_of::<MotorCommand>() == 8);
+    assert!(size_of::<Reset>() == 56 && align_of::<Reset>() == 8);
+    assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
+    assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8);
+    assert!(size_of::<GridHeader>() == 48 && align_of::<GridHeader>() == 8);
+    assert!(size_of::<GradientGrid>() == 48 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
+    assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
+};
