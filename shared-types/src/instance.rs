@@ -43,9 +43,10 @@ impl std::fmt::Display for InstanceNameError {
 
 impl std::error::Error for InstanceNameError {}
 
-/// Names of the services of one instance. Every topic is paired with an event service
-/// (`<topic>.ev`) its publisher notifies after each send, so readers block on a WaitSet
-/// instead of polling.
+/// Names of the services of one instance. Every topic is paired with an event service its
+/// publisher notifies after each send, so a reader can block instead of polling. Topics
+/// read by the same waiting loop share one event service: physics waits on
+/// [`ServiceNames::PHYSICS_INBOX`] for both motor commands and resets.
 pub struct ServiceNames;
 
 impl ServiceNames {
@@ -56,6 +57,8 @@ impl ServiceNames {
     pub const ESTIMATES: &'static str = "agp/estimates";
     pub const GRIDS: &'static str = "agp/grids";
     pub const TASK: &'static str = "agp/task";
+    /// The event service physics blocks on: notified after a motor command or a reset.
+    pub const PHYSICS_INBOX: &'static str = "agp/physics_inbox.ev";
 
     /// The event service paired with a topic.
     pub fn event_of(topic: &str) -> String {
@@ -193,34 +196,44 @@ impl Instance {
     }
 
     pub fn ir_frames(&self, node: &Node<ipc::Service>) -> Result<Topic<IrFrame>, OpenError> {
-        Topic::open(node, ServiceNames::IR_FRAMES, Qos::stream())
+        Topic::open(node, ServiceNames::IR_FRAMES, &ServiceNames::event_of(ServiceNames::IR_FRAMES), Qos::stream())
     }
 
     pub fn ground_truth(&self, node: &Node<ipc::Service>) -> Result<Topic<GroundTruth>, OpenError> {
-        Topic::open(node, ServiceNames::GROUND_TRUTH, Qos::stream())
+        Topic::open(node, ServiceNames::GROUND_TRUTH, &ServiceNames::event_of(ServiceNames::GROUND_TRUTH), Qos::stream())
     }
 
     pub fn motor_commands(
         &self,
         node: &Node<ipc::Service>,
     ) -> Result<Topic<MotorCommand>, OpenError> {
-        Topic::open(node, ServiceNames::MOTOR_COMMANDS, Qos::commands())
+        Topic::open(
+            node,
+            ServiceNames::MOTOR_COMMANDS,
+            ServiceNames::PHYSICS_INBOX,
+            Qos::commands(),
+        )
     }
 
     pub fn resets(&self, node: &Node<ipc::Service>) -> Result<Topic<Reset>, OpenError> {
-        Topic::open(node, ServiceNames::RESETS, Qos::commands())
+        Topic::open(
+            node,
+            ServiceNames::RESETS,
+            ServiceNames::PHYSICS_INBOX,
+            Qos::commands(),
+        )
     }
 
     pub fn estimates(&self, node: &Node<ipc::Service>) -> Result<Topic<ObjectEstimate>, OpenError> {
-        Topic::open(node, ServiceNames::ESTIMATES, Qos::stream())
+        Topic::open(node, ServiceNames::ESTIMATES, &ServiceNames::event_of(ServiceNames::ESTIMATES), Qos::stream())
     }
 
     pub fn grids(&self, node: &Node<ipc::Service>) -> Result<Topic<GradientGrid>, OpenError> {
-        Topic::open(node, ServiceNames::GRIDS, Qos::grids())
+        Topic::open(node, ServiceNames::GRIDS, &ServiceNames::event_of(ServiceNames::GRIDS), Qos::grids())
     }
 
     pub fn task(&self, node: &Node<ipc::Service>) -> Result<Topic<Task>, OpenError> {
-        Topic::open(node, ServiceNames::TASK, Qos::latched())
+        Topic::open(node, ServiceNames::TASK, &ServiceNames::event_of(ServiceNames::TASK), Qos::latched())
     }
 }
 
@@ -318,15 +331,18 @@ pub struct Topic<T: std::fmt::Debug + ZeroCopySend + 'static> {
 }
 
 impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
-    fn open(node: &Node<ipc::Service>, name: &str, qos: Qos) -> Result<Self, OpenError> {
+    fn open(
+        node: &Node<ipc::Service>,
+        name: &str,
+        event_str: &str,
+        qos: Qos,
+    ) -> Result<Self, OpenError> {
         let data_name: ServiceName = name
             .try_into()
             .map_err(|_| OpenError::ServiceName(name.to_owned()))?;
-        let event_str = ServiceNames::event_of(name);
         let event_name: ServiceName = event_str
-            .as_str()
             .try_into()
-            .map_err(|_| OpenError::ServiceName(event_str.clone()))?;
+            .map_err(|_| OpenError::ServiceName(event_str.to_owned()))?;
 
         // After a crash a service can answer "corrupted" for a moment, while its creator's
         // files are half removed: retry a few times before giving up.
@@ -355,7 +371,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
             match node
                 .service_builder(&event_name)
                 .event()
-                .max_notifiers(qos.max_publishers + 2)
+                .max_notifiers(16)
                 .max_listeners(qos.max_subscribers)
                 .max_nodes(16)
                 .open_or_create()

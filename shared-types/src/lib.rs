@@ -8,10 +8,30 @@
 //!
 //! Units: SI inside (metres, seconds, radians), as in the rest of the code.
 
+mod driver;
 mod instance;
 mod payloads;
+mod wait;
 
+pub use driver::{DriveError, LockstepDriver};
 pub use instance::{
-    Instance, InstanceNameError, MAX_INSTANCE_NAME_LEN, ServiceNames, instance_files_in,
+    Instance, InstanceNameError, MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, ServiceNames, Topic,
+    instance_files_in,
 };
 pub use payloads::*;
+pub use wait::{
+    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
+    shutdown_requested,
+};
+
+/// CLOCK_MONOTONIC in nanoseconds: system-wide on Linux, so stamps from different
+/// processes compare.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into the timespec we own.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}

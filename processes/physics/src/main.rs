@@ -1,1 +1,344 @@
-fn main(){}
+//! The physics process: simulates the robot, its IR sensors and the object, and talks to
+//! the rest of the pipeline only through the instance's iceoryx2 services.
+
+use std::time::{Duration, Instant};
+
+use agp_physics::{Sim, SimConfig};
+use agp_shared_types::{
+    GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, WaitOutcome, WaitStrategy, Waiter,
+    install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
+};
+use agp_world::{Pose, RobotDescription, Scenario};
+use anyhow::{Context, Result, bail};
+use clap::{Parser, ValueEnum};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Clock {
+    /// Advance one step only when the command for that step has arrived (reproducible).
+    Lockstep,
+    /// Step at a fixed rate on the wall clock; stop the wheels when commands go stale.
+    Realtime,
+}
+
+/// Simulates the E-puck, its eight IR sensors and one object, and publishes IR frames and
+/// ground truth over iceoryx2.
+///
+/// Every option can also come from the environment the supervisor sets (`AGP_INSTANCE`,
+/// `AGP_SCENARIO`, `AGP_CLOCK`, `AGP_RATE_HZ`).
+#[derive(Debug, Parser)]
+#[command(name = "agp-physics", version)]
+struct Args {
+    /// Instance name: selects the iceoryx2 prefix and root folder shared with the others.
+    #[arg(long, env = "AGP_INSTANCE")]
+    instance: String,
+    /// Built-in scenario (square, triangle, lshape, circle) or a scenario file.
+    #[arg(long, env = "AGP_SCENARIO", default_value = "triangle")]
+    scenario: String,
+    /// Clock mode.
+    #[arg(long, env = "AGP_CLOCK", value_enum, default_value = "lockstep")]
+    clock: Clock,
+    /// Physics steps per second of simulated time (also the realtime tick rate).
+    #[arg(long, env = "AGP_RATE_HZ", default_value_t = 640.0)]
+    rate_hz: f64,
+    /// Seed of the IR, odometry and overhead-fix noise (default: the scenario's).
+    #[arg(long, env = "AGP_SEED")]
+    seed: Option<u64>,
+    /// Realtime: stop the wheels when no command arrived for this long (ms).
+    #[arg(long, default_value_t = 250)]
+    watchdog_ms: u64,
+    /// Lockstep: give up when no command arrives for this long (s); 0 waits forever.
+    #[arg(long, default_value_t = 0)]
+    idle_timeout_s: u64,
+}
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("agp-physics: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run() -> Result<()> {
+    let args = Args::parse();
+    if !(args.rate_hz.is_finite() && args.rate_hz >= 64.0 && args.rate_hz <= 100_000.0) {
+        bail!("--rate-hz must be between 64 and 100000, got {}", args.rate_hz);
+    }
+    install_shutdown_handler();
+    let scenario = Scenario::resolve(&args.scenario)?;
+    let robot = RobotDescription::epuck();
+    let config = SimConfig {
+        step_hz: args.rate_hz,
+        seed: args.seed.unwrap_or(scenario.task.seed),
+        ..SimConfig::default()
+    };
+    let sim = Sim::new(&scenario, &robot, config)
+        .with_context(|| format!("cannot build the world of scenario `{}`", scenario.name))?;
+
+    let instance = Instance::new(&args.instance)
+        .with_context(|| format!("bad instance name `{}`", args.instance))?;
+    let node = instance
+        .node("physics", false)
+        .map_err(|e| anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}"))?;
+    let (ports, inbox) = Ports::open(&instance, &node)?;
+    let waiter = Waiter::new(inbox, WaitStrategy::from_env());
+
+    let mut runner = Runner {
+        sim,
+        ports,
+        reset_seq: 0,
+        active_epoch: 0,
+        trace_base: monotonic_ns(),
+        rate_hz: args.rate_hz,
+    };
+    match args.clock {
+        Clock::Lockstep => runner.lockstep(&waiter, args.idle_timeout_s),
+        Clock::Realtime => runner.realtime(&waiter, Duration::from_millis(args.watchdog_ms)),
+    }
+}
+
+struct Ports {
+    frames: Publisher<ipc::Service, IrFrame, ()>,
+    frames_ev: Notifier<ipc::Service>,
+    truth: Publisher<ipc::Service, GroundTruth, ()>,
+    truth_ev: Notifier<ipc::Service>,
+    commands: Subscriber<ipc::Service, MotorCommand, ()>,
+    resets: Subscriber<ipc::Service, Reset, ()>,
+}
+
+fn port_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
+    move |e| anyhow::anyhow!("cannot create the {what}: {e:?}")
+}
+
+impl Ports {
+    /// Opens every port physics uses, and the listener of its inbox.
+    fn open(
+        instance: &Instance,
+        node: &iceoryx2::prelude::Node<ipc::Service>,
+    ) -> Result<(Self, Listener<ipc::Service>)> {
+        let frames = instance.ir_frames(node)?;
+        let truth = instance.ground_truth(node)?;
+        let commands = instance.motor_commands(node)?;
+        let resets = instance.resets(node)?;
+        let inbox = commands
+            .event
+            .listener_builder()
+            .create()
+            .map_err(port_err("physics inbox listener"))?;
+        let ports = Self {
+            frames: frames
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(port_err("IR frame publisher"))?,
+            frames_ev: frames
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(port_err("IR frame notifier"))?,
+            truth: truth
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(port_err("ground truth publisher"))?,
+            truth_ev: truth
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(port_err("ground truth notifier"))?,
+            commands: commands
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(port_err("motor command subscriber"))?,
+            resets: resets
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(port_err("reset subscriber"))?,
+        };
+        Ok((ports, inbox))
+    }
+}
+
+struct Runner {
+    sim: Sim,
+    ports: Ports,
+    reset_seq: u64,
+    active_epoch: u64,
+    trace_base: u64,
+    rate_hz: f64,
+}
+
+fn pose2(p: Pose) -> Pose2 {
+    Pose2::new(p.x, p.y, p.theta)
+}
+
+fn pose(p: Pose2) -> Pose {
+    Pose::new(p.x, p.y, p.theta)
+}
+
+impl Runner {
+    /// Publishes the frame and ground truth of the current step.
+    fn publish(&mut self, applied_ns: u64, command_received_ns: u64) -> Result<()> {
+        let s = self.sim.sensors();
+        let step = self.sim.step_count();
+        let mut frame = IrFrame {
+            step,
+            sim_time_s: self.sim.sim_time(),
+            ir_sample: s.ir_sample,
+            ir_raw: s.ir_raw,
+            odometry: pose2(s.odometry),
+            fix_seq: s.fix_seq,
+            fix: pose2(s.fix),
+            reset_seq: self.reset_seq,
+            active_epoch: self.active_epoch,
+            ..IrFrame::default()
+        };
+        frame.timing.trace_id = self.trace_base.wrapping_add(step);
+        frame.timing.stamps_ns[stage::COMMAND_RECEIVED] = command_received_ns;
+        frame.timing.stamps_ns[stage::COMMAND_APPLIED] = applied_ns;
+        let truth = GroundTruth {
+            step,
+            sim_time_s: self.sim.sim_time(),
+            robot: pose2(self.sim.robot_pose()),
+            object: pose2(self.sim.object_pose()),
+            contact: self.sim.in_contact() as u8,
+            _pad: [0; 7],
+        };
+        // Ground truth first: a reader woken by the frame then finds the truth of that step.
+        let sample = self
+            .ports
+            .truth
+            .loan_uninit()
+            .map_err(|e| anyhow::anyhow!("cannot loan a ground truth sample: {e:?}"))?;
+        sample
+            .write_payload(truth)
+            .send()
+            .map_err(|e| anyhow::anyhow!("cannot send ground truth: {e:?}"))?;
+        let _ = self.ports.truth_ev.notify();
+        frame.timing.stamps_ns[stage::FRAME_PUBLISHED] = monotonic_ns();
+        let sample = self
+            .ports
+            .frames
+            .loan_uninit()
+            .map_err(|e| anyhow::anyhow!("cannot loan an IR frame sample: {e:?}"))?;
+        sample
+            .write_payload(frame)
+            .send()
+            .map_err(|e| anyhow::anyhow!("cannot send an IR frame: {e:?}"))?;
+        let _ = self.ports.frames_ev.notify();
+        Ok(())
+    }
+
+    /// Applies the last pending reset, if any. Returns whether one was applied.
+    fn apply_resets(&mut self) -> Result<bool> {
+        let mut last = None;
+        while let Some(r) = self
+            .ports
+            .resets
+            .receive()
+            .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
+        {
+            last = Some(*r);
+        }
+        if let Some(r) = last {
+            self.sim.reset(pose(r.object), pose(r.robot));
+            self.reset_seq = r.seq;
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    fn lockstep(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
+        let timeout = if idle_timeout_s == 0 {
+            Duration::from_secs(3600 * 24 * 365)
+        } else {
+            Duration::from_secs(idle_timeout_s)
+        };
+        self.publish(0, 0)?;
+        loop {
+            let step = self.sim.step_count();
+            let epoch = self.active_epoch;
+            let mut reset = false;
+            let outcome = {
+                let commands = &self.ports.commands;
+                let resets = &self.ports.resets;
+                waiter.wait_for(timeout, || {
+                    if resets.has_samples().unwrap_or(false) {
+                        return Some(None);
+                    }
+                    while let Ok(Some(c)) = commands.receive() {
+                        if c.step == step && c.epoch == epoch {
+                            let received = monotonic_ns();
+                            return Some(Some((c.left_mps, c.right_mps, received)));
+                        }
+                        // A command of another step or epoch: stale, or from a planner that
+                        // is not active. Dropped.
+                    }
+                    None
+                })
+            };
+            match outcome {
+                WaitOutcome::Shutdown => return Ok(()),
+                WaitOutcome::TimedOut => bail!("no motor command for step {step} within {idle_timeout_s} s"),
+                WaitOutcome::Ready(None) => reset = self.apply_resets()?,
+                WaitOutcome::Ready(Some((l, r, received))) => {
+                    self.sim.step(l, r);
+                    self.publish(monotonic_ns(), received)?;
+                }
+            }
+            if reset {
+                // The same step again, with the world as the reset put it.
+                self.publish(0, 0)?;
+            }
+        }
+    }
+
+    fn realtime(&mut self, waiter: &Waiter, watchdog: Duration) -> Result<()> {
+        let period = Duration::from_secs_f64(1.0 / self.rate_hz);
+        let mut wheels = (0.0, 0.0);
+        let mut last_command = Instant::now() - watchdog;
+        let mut next = Instant::now();
+        self.publish(0, 0)?;
+        while !shutdown_requested() {
+            if self.apply_resets()? {
+                wheels = (0.0, 0.0);
+            }
+            let mut received = 0;
+            while let Some(c) = self
+                .ports
+                .commands
+                .receive()
+                .map_err(|e| anyhow::anyhow!("cannot receive a command: {e:?}"))?
+            {
+                if c.epoch == self.active_epoch {
+                    wheels = (c.left_mps, c.right_mps);
+                    last_command = Instant::now();
+                    received = monotonic_ns();
+                }
+            }
+            if last_command.elapsed() > watchdog {
+                // Stale commands: stop, as the robot's firmware would.
+                wheels = (0.0, 0.0);
+            }
+            self.sim.step(wheels.0, wheels.1);
+            self.publish(monotonic_ns(), received)?;
+            next += period;
+            let now = Instant::now();
+            if next > now {
+                // Sleep on the inbox so the loop also wakes for shutdown; commands are read
+                // at the next tick.
+                let _ = waiter.wait_for(next - now, || None::<()>);
+            } else if now - next > period * 100 {
+                // Far behind (the machine stalled): do not try to catch up in a burst.
+                next = now;
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,126 @@
+//! The planner process: chooses and carries out pushes.
+
+use std::time::Duration;
+
+use agp_planner::{ContactSense, PushPhase, PushRoutine, PushSettings};
+use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2, install_shutdown_handler};
+use agp_world::{RobotDescription, Scenario, wrap_angle};
+use anyhow::{Context, Result, bail};
+use clap::{Parser, ValueEnum};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Mode {
+    /// A scripted drive straight against physics: push the object from a few sides,
+    /// inferring contact from the IR readings, and report what the robot sensed. No
+    /// estimator is needed; the run ends when the script does.
+    Script,
+}
+
+/// Chooses pushes and drives the robot.
+///
+/// Every option can also come from the environment the supervisor sets (`AGP_INSTANCE`,
+/// `AGP_SCENARIO`, `AGP_CLOCK`).
+#[derive(Debug, Parser)]
+#[command(name = "agp-planner", version)]
+struct Args {
+    /// Instance name, shared with the other processes of the pipeline.
+    #[arg(long, env = "AGP_INSTANCE")]
+    instance: String,
+    /// Built-in scenario or scenario file (the same physics runs).
+    #[arg(long, env = "AGP_SCENARIO", default_value = "triangle")]
+    scenario: String,
+    /// Clock mode of the pipeline: the script needs `lockstep`.
+    #[arg(long, env = "AGP_CLOCK", default_value = "lockstep")]
+    clock: String,
+    /// What to do.
+    #[arg(long, value_enum, default_value = "script")]
+    mode: Mode,
+    /// Script: number of pushes, from sides evenly spread around the object.
+    #[arg(long, default_value_t = 4)]
+    pushes: u32,
+    /// Push duration after contact, milliseconds.
+    #[arg(long, default_value_t = 2000)]
+    push_ms: u64,
+}
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("agp-planner: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run() -> Result<()> {
+    let args = Args::parse();
+    install_shutdown_handler();
+    let scenario = Scenario::resolve(&args.scenario)?;
+    let instance = Instance::new(&args.instance)
+        .with_context(|| format!("bad instance name `{}`", args.instance))?;
+    match args.mode {
+        Mode::Script => {
+            if args.clock != "lockstep" {
+                bail!("the scripted drive needs the lockstep clock, not `{}`", args.clock);
+            }
+            script(&instance, &scenario, &args)
+        }
+    }
+}
+
+fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
+    let robot = RobotDescription::epuck();
+    let sense = ContactSense::new(&robot);
+    let mut driver = match LockstepDriver::connect(instance, "planner", 0, false, Duration::from_secs(30)) {
+        Ok(d) => d,
+        Err(DriveError::Shutdown) => return Ok(()),
+        Err(e) => return Err(e).context("cannot reach physics"),
+    };
+    let settings = PushSettings {
+        push_duration: args.push_ms as f64 * 1e-3,
+        ..PushSettings::default()
+    };
+    let obj = scenario.object.start;
+    let radius = scenario.object.shape.radius() + robot.body_radius + 0.03;
+    println!(
+        "scripted drive: {} pushes of `{}`, {} ms each",
+        args.pushes, scenario.name, args.push_ms
+    );
+    for k in 0..args.pushes {
+        let side = obj.theta + std::f64::consts::TAU * k as f64 / args.pushes.max(1) as f64;
+        let (x, y) = (obj.x + radius * side.cos(), obj.y + radius * side.sin());
+        let heading = wrap_angle(side + std::f64::consts::PI);
+        // The learning phase puts the object back before each trial; so does the script.
+        let frame = match driver.reset(Pose2::new(obj.x, obj.y, obj.theta), Pose2::new(x, y, heading)) {
+            Ok(f) => *f,
+            Err(DriveError::Shutdown) => return Ok(()),
+            Err(e) => return Err(e.into()),
+        };
+        let start_odo = frame.odometry;
+        let mut routine = PushRoutine::new(settings, frame.sim_time_s);
+        let mut peak = 0f32;
+        loop {
+            let f = *driver.frame();
+            peak = peak.max(f.ir_raw[0].max(f.ir_raw[7]));
+            if let PushPhase::Done { contact } = routine.phase() {
+                let odo = f.odometry;
+                println!(
+                    "  push {}/{} from {:>5.1} deg: {}, front IR peak {:>6.0}, robot travelled {:>5.1} mm by odometry",
+                    k + 1,
+                    args.pushes,
+                    side.to_degrees(),
+                    if contact { "contact inferred from IR" } else { "no contact" },
+                    peak,
+                    (odo.x - start_odo.x).hypot(odo.y - start_odo.y) * 1e3
+                );
+                break;
+            }
+            let (l, r) = routine.update(&sense, f.sim_time_s, &f.ir_raw);
+            match driver.step(l, r) {
+                Ok(_) => {}
+                Err(DriveError::Shutdown) => return Ok(()),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    println!("scripted drive done");
+    Ok(())
+}

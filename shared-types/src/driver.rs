@@ -1,0 +1,200 @@
+use std::time::Duration;
+
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{Node, ipc};
+
+use crate::instance::Instance;
+use crate::payloads::{GroundTruth, IrFrame, MotorCommand, Pose2, Reset};
+use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
+use crate::{monotonic_ns, stage};
+
+/// Why driving physics failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DriveError {
+    #[error("cannot open `{what}`: {detail}")]
+    Open { what: &'static str, detail: String },
+    #[error("no IR frame of step {step} from physics within {timeout:?}: is `agp-physics` running in lockstep on this instance?")]
+    NoFrame { step: u64, timeout: Duration },
+    #[error("shutdown requested")]
+    Shutdown,
+    #[error("iceoryx2 {0}")]
+    Port(String),
+}
+
+/// Drives a lockstep physics process directly: sends a motor command for the current step,
+/// waits for the next frame. Used by the probe, the scripted drive and tests; the pipeline's
+/// planner goes through the estimator instead.
+///
+/// With `ground_truth`, it also reads the true poses: that makes it an evaluation tool, which
+/// no estimator or planner may be.
+pub struct LockstepDriver {
+    _node: Node<ipc::Service>,
+    frames: Subscriber<ipc::Service, IrFrame, ()>,
+    truth: Option<Subscriber<ipc::Service, GroundTruth, ()>>,
+    commands: Publisher<ipc::Service, MotorCommand, ()>,
+    resets: Publisher<ipc::Service, Reset, ()>,
+    physics_inbox: Notifier<ipc::Service>,
+    waiter: Waiter,
+    frame: IrFrame,
+    last_truth: GroundTruth,
+    epoch: u64,
+    timeout: Duration,
+    resets_sent: u64,
+}
+
+fn port<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> DriveError {
+    move |e| DriveError::Open {
+        what,
+        detail: format!("{e:?}"),
+    }
+}
+
+impl LockstepDriver {
+    /// Connects to the instance's physics and waits (up to `timeout`) for its first frame.
+    pub fn connect(
+        instance: &Instance,
+        node_name: &str,
+        epoch: u64,
+        ground_truth: bool,
+        timeout: Duration,
+    ) -> Result<Self, DriveError> {
+        let node = instance.node(node_name, false).map_err(port("node"))?;
+        let frames = instance.ir_frames(&node).map_err(port("IR frames"))?;
+        let commands = instance.motor_commands(&node).map_err(port("motor commands"))?;
+        let resets = instance.resets(&node).map_err(port("resets"))?;
+        let truth = if ground_truth {
+            let t = instance.ground_truth(&node).map_err(port("ground truth"))?;
+            Some(t.data.subscriber_builder().create().map_err(port("ground truth"))?)
+        } else {
+            None
+        };
+        let listener = frames
+            .event
+            .listener_builder()
+            .create()
+            .map_err(port("IR frame listener"))?;
+        let mut driver = Self {
+            frames: frames
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(port("IR frame subscriber"))?,
+            truth,
+            commands: commands
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(port("motor command publisher"))?,
+            resets: resets
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(port("reset publisher"))?,
+            physics_inbox: commands
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(port("physics inbox notifier"))?,
+            waiter: Waiter::new(listener, WaitStrategy::from_env()),
+            frame: IrFrame::default(),
+            last_truth: GroundTruth::default(),
+            epoch,
+            timeout,
+            resets_sent: 0,
+            _node: node,
+        };
+        driver.frame = driver.wait_frame(|_| true, 0)?;
+        Ok(driver)
+    }
+
+    /// The latest frame.
+    pub fn frame(&self) -> &IrFrame {
+        &self.frame
+    }
+
+    /// The ground truth of the latest frame's step (only when connected with ground truth).
+    pub fn truth(&self) -> &GroundTruth {
+        &self.last_truth
+    }
+
+    fn wait_frame(&mut self, accept: impl Fn(&IrFrame) -> bool, step: u64) -> Result<IrFrame, DriveError> {
+        let frames = &self.frames;
+        let outcome = self.waiter.wait_for(self.timeout, || {
+            let mut found = None;
+            while let Ok(Some(f)) = frames.receive() {
+                if accept(&f) {
+                    found = Some(*f);
+                }
+            }
+            found
+        });
+        let frame = match outcome {
+            WaitOutcome::Ready(f) => f,
+            WaitOutcome::TimedOut => {
+                return Err(DriveError::NoFrame {
+                    step,
+                    timeout: self.timeout,
+                });
+            }
+            WaitOutcome::Shutdown => return Err(DriveError::Shutdown),
+        };
+        if let Some(t) = &self.truth {
+            // Physics publishes a step's truth before its frame.
+            while let Ok(Some(s)) = t.receive() {
+                if s.step == frame.step {
+                    self.last_truth = *s;
+                }
+            }
+        }
+        Ok(frame)
+    }
+
+    /// Applies wheel speeds for one step and returns the next frame.
+    pub fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<&IrFrame, DriveError> {
+        let step = self.frame.step;
+        let mut cmd = MotorCommand {
+            step,
+            epoch: self.epoch,
+            left_mps,
+            right_mps,
+            ..MotorCommand::default()
+        };
+        cmd.timing.trace_id = self.frame.timing.trace_id;
+        cmd.timing.stamps_ns = self.frame.timing.stamps_ns;
+        cmd.timing.stamps_ns[stage::COMMAND_PUBLISHED] = monotonic_ns();
+        let sample = self
+            .commands
+            .loan_uninit()
+            .map_err(|e| DriveError::Port(format!("loan of a motor command: {e:?}")))?;
+        sample
+            .write_payload(cmd)
+            .send()
+            .map_err(|e| DriveError::Port(format!("send of a motor command: {e:?}")))?;
+        let _ = self.physics_inbox.notify();
+        let reset_seq = self.frame.reset_seq;
+        self.frame = self.wait_frame(|f| f.step == step + 1 && f.reset_seq == reset_seq, step + 1)?;
+        Ok(&self.frame)
+    }
+
+    /// Puts object and robot at the given world poses (odometry restarts at the robot's
+    /// pose) and returns the frame of the reset world.
+    pub fn reset(&mut self, object: Pose2, robot: Pose2) -> Result<&IrFrame, DriveError> {
+        self.resets_sent += 1;
+        // Unique per driver and reset, so an old frame is never taken for the new world.
+        let seq = (monotonic_ns() & !0xffff) | (self.resets_sent & 0xffff);
+        let sample = self
+            .resets
+            .loan_uninit()
+            .map_err(|e| DriveError::Port(format!("loan of a reset: {e:?}")))?;
+        sample
+            .write_payload(Reset { seq, object, robot })
+            .send()
+            .map_err(|e| DriveError::Port(format!("send of a reset: {e:?}")))?;
+        let _ = self.physics_inbox.notify();
+        let step = self.frame.step;
+        self.frame = self.wait_frame(|f| f.reset_seq == seq, step)?;
+        Ok(&self.frame)
+    }
+}
