@@ -15,6 +15,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::ipc;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -255,11 +256,11 @@ impl Runner {
     }
 
     fn lockstep(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
-        let timeout = if idle_timeout_s == 0 {
-            Duration::from_secs(3600 * 24 * 365)
-        } else {
-            Duration::from_secs(idle_timeout_s)
-        };
+        let idle_limit = (idle_timeout_s > 0).then(|| Duration::from_secs(idle_timeout_s));
+        // A subscriber that connects while physics waits gets the latest frame from history
+        // only when the publisher updates its connections: do so at this period while idle.
+        let slice = Duration::from_millis(20);
+        let mut idle_since = Instant::now();
         self.publish(0, 0)?;
         loop {
             let step = self.sim.step_count();
@@ -268,7 +269,7 @@ impl Runner {
             let outcome = {
                 let commands = &self.ports.commands;
                 let resets = &self.ports.resets;
-                waiter.wait_for(timeout, || {
+                waiter.wait_for(slice, || {
                     if resets.has_samples().unwrap_or(false) {
                         return Some(None);
                     }
@@ -285,9 +286,19 @@ impl Runner {
             };
             match outcome {
                 WaitOutcome::Shutdown => return Ok(()),
-                WaitOutcome::TimedOut => bail!("no motor command for step {step} within {idle_timeout_s} s"),
-                WaitOutcome::Ready(None) => reset = self.apply_resets()?,
+                WaitOutcome::TimedOut => {
+                    if idle_limit.is_some_and(|limit| idle_since.elapsed() > limit) {
+                        bail!("no motor command for step {step} within {idle_timeout_s} s");
+                    }
+                    self.update_connections()?;
+                    continue;
+                }
+                WaitOutcome::Ready(None) => {
+                    idle_since = Instant::now();
+                    reset = self.apply_resets()?;
+                }
                 WaitOutcome::Ready(Some((l, r, received))) => {
+                    idle_since = Instant::now();
                     self.sim.step(l, r);
                     self.publish(monotonic_ns(), received)?;
                 }
@@ -297,6 +308,19 @@ impl Runner {
                 self.publish(0, 0)?;
             }
         }
+    }
+
+    /// Hands history to subscribers that connected since the last send.
+    fn update_connections(&self) -> Result<()> {
+        self.ports
+            .frames
+            .update_connections()
+            .map_err(|e| anyhow::anyhow!("cannot update IR frame connections: {e:?}"))?;
+        self.ports
+            .truth
+            .update_connections()
+            .map_err(|e| anyhow::anyhow!("cannot update ground truth connections: {e:?}"))?;
+        Ok(())
     }
 
     fn realtime(&mut self, waiter: &Waiter, watchdog: Duration) -> Result<()> {

@@ -44,6 +44,11 @@ impl ContactSense {
             .reduce(f64::min)
     }
 
+    /// The robot's IR sampling rate, Hz.
+    pub fn ir_rate_hz(&self) -> f64 {
+        self.robot.ir_rate_hz
+    }
+
     /// Length of each front ray inside the body, metres (IR1, IR2, IR7, IR8 order).
     pub fn inner_lengths(&self) -> [f64; 4] {
         self.inner

@@ -113,7 +113,7 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
                 );
                 break;
             }
-            let (l, r) = routine.update(&sense, f.sim_time_s, &f.ir_raw);
+            let (l, r) = routine.update(&sense, f.sim_time_s, f.ir_sample, &f.ir_raw);
             match driver.step(l, r) {
                 Ok(_) => {}
                 Err(DriveError::Shutdown) => return Ok(()),

@@ -36,13 +36,25 @@ pub enum PushPhase {
     Done { contact: bool },
 }
 
+/// IR samples over which a stalled gap is judged (5 samples = 78 ms at 64 Hz).
+const STALL_SAMPLES: usize = 5;
+
 /// The push as a state machine, fed one IR frame per control step.
+///
+/// Contact is inferred from the IR alone (the paper's ObjInContact), in two ways: the front
+/// gap falls under `stop_gap`, or the gap stops shrinking although the robot drives forward
+/// (the object moves with it). The second catches a sharp corner met head-on, which slips
+/// between the front rays: their readings then come from the faces behind the corner and
+/// never show a small gap.
 #[derive(Debug, Clone)]
 pub struct PushRoutine {
     settings: PushSettings,
     phase: PushPhase,
     /// Simulated time at which contact was inferred.
     pub contact_time: Option<f64>,
+    last_sample: u64,
+    gaps: [Option<f64>; STALL_SAMPLES + 1],
+    samples_seen: usize,
 }
 
 impl PushRoutine {
@@ -51,20 +63,50 @@ impl PushRoutine {
             settings,
             phase: PushPhase::Approach { since: now },
             contact_time: None,
+            last_sample: u64::MAX,
+            gaps: [None; STALL_SAMPLES + 1],
+            samples_seen: 0,
         }
+    }
+
+    /// Whether the gap has stopped shrinking over the last samples while approaching.
+    fn stalled(&self, sample_period: f64) -> bool {
+        if self.samples_seen <= STALL_SAMPLES {
+            return false;
+        }
+        let (Some(now), Some(then)) = (self.gaps[0], self.gaps[STALL_SAMPLES]) else {
+            return false;
+        };
+        let expected = self.settings.approach_speed * sample_period * STALL_SAMPLES as f64;
+        // Within IR range a free approach closes the gap by `expected` (5 mm at 80 mm/s);
+        // distance noise is about 1 mm at these ranges. Under a quarter of it: pushing.
+        then - now < 0.25 * expected
     }
 
     pub fn phase(&self) -> PushPhase {
         self.phase
     }
 
-    /// Wheel speeds (left, right) for this step, given the frame's time and IR readings.
-    pub fn update(&mut self, sense: &ContactSense, now: f64, ir_raw: &[f32; 8]) -> (f64, f64) {
+    /// Wheel speeds (left, right) for this step, given the frame's time, IR sample counter
+    /// and IR readings.
+    pub fn update(
+        &mut self,
+        sense: &ContactSense,
+        now: f64,
+        ir_sample: u64,
+        ir_raw: &[f32; 8],
+    ) -> (f64, f64) {
         match self.phase {
             PushPhase::Approach { since } => {
-                let near = sense
-                    .front_gap(ir_raw)
-                    .is_some_and(|g| g <= self.settings.stop_gap);
+                let gap = sense.front_gap(ir_raw);
+                if ir_sample != self.last_sample {
+                    self.last_sample = ir_sample;
+                    self.gaps.rotate_right(1);
+                    self.gaps[0] = gap;
+                    self.samples_seen += 1;
+                }
+                let near = gap.is_some_and(|g| g <= self.settings.stop_gap)
+                    || self.stalled(1.0 / sense.ir_rate_hz());
                 if near {
                     self.contact_time = Some(now);
                     self.phase = PushPhase::Push {
