@@ -15,7 +15,9 @@ use crate::{monotonic_ns, stage};
 pub enum DriveError {
     #[error("cannot open `{what}`: {detail}")]
     Open { what: &'static str, detail: String },
-    #[error("no IR frame of step {step} from physics within {timeout:?}: is `agp-physics` running in lockstep on this instance?")]
+    #[error(
+        "no IR frame of step {step} from physics within {timeout:?}: is `agp-physics` running in lockstep on this instance?"
+    )]
     NoFrame { step: u64, timeout: Duration },
     #[error("shutdown requested")]
     Shutdown,
@@ -62,11 +64,18 @@ impl LockstepDriver {
     ) -> Result<Self, DriveError> {
         let node = instance.node(node_name, false).map_err(port("node"))?;
         let frames = instance.ir_frames(&node).map_err(port("IR frames"))?;
-        let commands = instance.motor_commands(&node).map_err(port("motor commands"))?;
+        let commands = instance
+            .motor_commands(&node)
+            .map_err(port("motor commands"))?;
         let resets = instance.resets(&node).map_err(port("resets"))?;
         let truth = if ground_truth {
             let t = instance.ground_truth(&node).map_err(port("ground truth"))?;
-            Some(t.data.subscriber_builder().create().map_err(port("ground truth"))?)
+            Some(
+                t.data
+                    .subscriber_builder()
+                    .create()
+                    .map_err(port("ground truth"))?,
+            )
         } else {
             None
         };
@@ -119,7 +128,11 @@ impl LockstepDriver {
         &self.last_truth
     }
 
-    fn wait_frame(&mut self, accept: impl Fn(&IrFrame) -> bool, step: u64) -> Result<IrFrame, DriveError> {
+    fn wait_frame(
+        &mut self,
+        accept: impl Fn(&IrFrame) -> bool,
+        step: u64,
+    ) -> Result<IrFrame, DriveError> {
         let frames = &self.frames;
         let outcome = self.waiter.wait_for(self.timeout, || {
             let mut found = None;
@@ -174,7 +187,8 @@ impl LockstepDriver {
             .map_err(|e| DriveError::Port(format!("send of a motor command: {e:?}")))?;
         let _ = self.physics_inbox.notify();
         let reset_seq = self.frame.reset_seq;
-        self.frame = self.wait_frame(|f| f.step == step + 1 && f.reset_seq == reset_seq, step + 1)?;
+        self.frame =
+            self.wait_frame(|f| f.step == step + 1 && f.reset_seq == reset_seq, step + 1)?;
         Ok(&self.frame)
     }
 

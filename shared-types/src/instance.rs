@@ -8,7 +8,9 @@ use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use crate::payloads::{GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task};
+use crate::payloads::{
+    GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
+};
 
 /// Longest instance name: root path plus prefix must stay under about 60 characters, since
 /// iceoryx2 derives Unix socket paths from them.
@@ -196,11 +198,21 @@ impl Instance {
     }
 
     pub fn ir_frames(&self, node: &Node<ipc::Service>) -> Result<Topic<IrFrame>, OpenError> {
-        Topic::open(node, ServiceNames::IR_FRAMES, &ServiceNames::event_of(ServiceNames::IR_FRAMES), Qos::stream())
+        Topic::open(
+            node,
+            ServiceNames::IR_FRAMES,
+            &ServiceNames::event_of(ServiceNames::IR_FRAMES),
+            Qos::stream(),
+        )
     }
 
     pub fn ground_truth(&self, node: &Node<ipc::Service>) -> Result<Topic<GroundTruth>, OpenError> {
-        Topic::open(node, ServiceNames::GROUND_TRUTH, &ServiceNames::event_of(ServiceNames::GROUND_TRUTH), Qos::stream())
+        Topic::open(
+            node,
+            ServiceNames::GROUND_TRUTH,
+            &ServiceNames::event_of(ServiceNames::GROUND_TRUTH),
+            Qos::stream(),
+        )
     }
 
     pub fn motor_commands(
@@ -225,15 +237,30 @@ impl Instance {
     }
 
     pub fn estimates(&self, node: &Node<ipc::Service>) -> Result<Topic<ObjectEstimate>, OpenError> {
-        Topic::open(node, ServiceNames::ESTIMATES, &ServiceNames::event_of(ServiceNames::ESTIMATES), Qos::stream())
+        Topic::open(
+            node,
+            ServiceNames::ESTIMATES,
+            &ServiceNames::event_of(ServiceNames::ESTIMATES),
+            Qos::stream(),
+        )
     }
 
     pub fn grids(&self, node: &Node<ipc::Service>) -> Result<Topic<GradientGrid>, OpenError> {
-        Topic::open(node, ServiceNames::GRIDS, &ServiceNames::event_of(ServiceNames::GRIDS), Qos::grids())
+        Topic::open(
+            node,
+            ServiceNames::GRIDS,
+            &ServiceNames::event_of(ServiceNames::GRIDS),
+            Qos::grids(),
+        )
     }
 
     pub fn task(&self, node: &Node<ipc::Service>) -> Result<Topic<Task>, OpenError> {
-        Topic::open(node, ServiceNames::TASK, &ServiceNames::event_of(ServiceNames::TASK), Qos::latched())
+        Topic::open(
+            node,
+            ServiceNames::TASK,
+            &ServiceNames::event_of(ServiceNames::TASK),
+            Qos::latched(),
+        )
     }
 }
 

@@ -67,7 +67,11 @@ impl WaitStrategy {
             "yield" => Some(Self::Yield),
             "block" => Some(Self::Block),
             "spin-then-block" => {
-                let us = if arg.is_empty() { 200 } else { arg.parse().ok()? };
+                let us = if arg.is_empty() {
+                    200
+                } else {
+                    arg.parse().ok()?
+                };
                 Some(Self::SpinThenBlock {
                     spin: Duration::from_micros(us),
                 })

@@ -124,7 +124,10 @@ impl Polygon {
     /// Largest distance from the centroid to a vertex.
     pub fn radius(&self) -> f64 {
         let c = self.centroid();
-        self.vertices.iter().map(|v| (*v - c).length()).fold(0.0, f64::max)
+        self.vertices
+            .iter()
+            .map(|v| (*v - c).length())
+            .fold(0.0, f64::max)
     }
 
     /// Splits the polygon into triangles (ear clipping), for physics colliders and
@@ -172,7 +175,9 @@ impl Polygon {
         self.edges()
             .filter_map(|(a, b)| ray_segment(origin, dir, a, b))
             .filter(|t| *t <= max)
-            .fold(None, |best: Option<f64>, t| Some(best.map_or(t, |b| b.min(t))))
+            .fold(None, |best: Option<f64>, t| {
+                Some(best.map_or(t, |b| b.min(t)))
+            })
     }
 }
 
@@ -213,7 +218,12 @@ fn on_segment(a: DVec2, b: DVec2, p: DVec2) -> bool {
 
 /// Whether the closed segments ab and cd share a point.
 pub fn segments_intersect(a: DVec2, b: DVec2, c: DVec2, d: DVec2) -> bool {
-    let (o1, o2, o3, o4) = (orient(a, b, c), orient(a, b, d), orient(c, d, a), orient(c, d, b));
+    let (o1, o2, o3, o4) = (
+        orient(a, b, c),
+        orient(a, b, d),
+        orient(c, d, a),
+        orient(c, d, b),
+    );
     if ((o1 > 0.0 && o2 < 0.0) || (o1 < 0.0 && o2 > 0.0))
         && ((o3 > 0.0 && o4 < 0.0) || (o3 < 0.0 && o4 > 0.0))
     {
@@ -264,7 +274,12 @@ mod tests {
 
     #[test]
     fn a_clockwise_polygon_is_turned_counter_clockwise() {
-        let p = Polygon::new(vec![DVec2::ZERO, DVec2::new(0.0, 1.0), DVec2::new(1.0, 0.0)]).unwrap();
+        let p = Polygon::new(vec![
+            DVec2::ZERO,
+            DVec2::new(0.0, 1.0),
+            DVec2::new(1.0, 0.0),
+        ])
+        .unwrap();
         assert!(p.area() > 0.0);
     }
 
@@ -282,18 +297,32 @@ mod tests {
 
     #[test]
     fn collinear_points_are_refused_as_zero_area() {
-        let e = Polygon::new(vec![DVec2::ZERO, DVec2::new(1.0, 0.0), DVec2::new(2.0, 0.0)])
-            .unwrap_err();
-        assert!(matches!(e, PolygonError::ZeroArea | PolygonError::SelfIntersecting(..)));
+        let e = Polygon::new(vec![
+            DVec2::ZERO,
+            DVec2::new(1.0, 0.0),
+            DVec2::new(2.0, 0.0),
+        ])
+        .unwrap_err();
+        assert!(matches!(
+            e,
+            PolygonError::ZeroArea | PolygonError::SelfIntersecting(..)
+        ));
     }
 
     #[test]
     fn an_l_shape_triangulates_into_its_area() {
         let l = Polygon::new(
-            [[0.0, 0.0], [3.0, 0.0], [3.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]]
-                .iter()
-                .map(|p| DVec2::new(p[0], p[1]))
-                .collect(),
+            [
+                [0.0, 0.0],
+                [3.0, 0.0],
+                [3.0, 1.0],
+                [1.0, 1.0],
+                [1.0, 2.0],
+                [0.0, 2.0],
+            ]
+            .iter()
+            .map(|p| DVec2::new(p[0], p[1]))
+            .collect(),
         )
         .unwrap();
         let tris = l.triangulate();

@@ -40,14 +40,20 @@ impl ResponseCurve {
             return Err("the response curve needs at least two rows".into());
         }
         for (i, w) in rows.windows(2).enumerate() {
-            if !(w[1].0 > w[0].0) {
+            if w[1].0.partial_cmp(&w[0].0) != Some(std::cmp::Ordering::Greater) {
                 return Err(format!("row {}: distances must increase", i + 2));
             }
-            if !(w[1].1 < w[0].1) {
-                return Err(format!("row {}: readings must decrease with distance", i + 2));
+            if w[1].1.partial_cmp(&w[0].1) != Some(std::cmp::Ordering::Less) {
+                return Err(format!(
+                    "row {}: readings must decrease with distance",
+                    i + 2
+                ));
             }
         }
-        if rows.iter().any(|r| !(r.0 >= 0.0 && r.1 > 0.0 && r.2 >= 0.0)) {
+        if rows
+            .iter()
+            .any(|r| !(r.0 >= 0.0 && r.1 > 0.0 && r.2 >= 0.0))
+        {
             return Err("distances, readings and noise must be non-negative".into());
         }
         Ok(Self { rows })
@@ -68,7 +74,7 @@ impl ResponseCurve {
     }
 
     fn segment(&self, d: f64) -> Option<(usize, f64)> {
-        if !(d >= self.rows[0].0) || d > self.max_range() {
+        if d.is_nan() || d < self.rows[0].0 || d > self.max_range() {
             return None;
         }
         let i = self
@@ -105,7 +111,7 @@ impl ResponseCurve {
     /// to distance 0.
     pub fn distance(&self, raw: f64) -> Option<f64> {
         let last = self.rows[self.rows.len() - 1].1;
-        if !(raw >= last) {
+        if raw.is_nan() || raw < last {
             return None;
         }
         if raw >= self.rows[0].1 {
@@ -122,7 +128,8 @@ impl ResponseCurve {
     pub fn distance_sigma(&self, d: f64) -> f64 {
         match self.segment(d) {
             Some((i, _)) => {
-                let slope = (self.rows[i + 1].1 - self.rows[i].1) / (self.rows[i + 1].0 - self.rows[i].0);
+                let slope =
+                    (self.rows[i + 1].1 - self.rows[i].1) / (self.rows[i + 1].0 - self.rows[i].0);
                 self.noise_sigma(d) / slope.abs()
             }
             None => f64::INFINITY,
@@ -209,7 +216,8 @@ struct ResponseFile {
 impl RobotDescription {
     /// The E-puck, from the description built into the library.
     pub fn epuck() -> Self {
-        Self::parse(EPUCK_TOML, "<built-in e-puck>").expect("the built-in e-puck description is valid")
+        Self::parse(EPUCK_TOML, "<built-in e-puck>")
+            .expect("the built-in e-puck description is valid")
     }
 
     /// Loads a description from a TOML file of the same form as `data/epuck.toml`.
@@ -242,7 +250,9 @@ impl RobotDescription {
         ];
         for (key, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(invalid(format!("`{key}` must be a positive number, got {v}")));
+                return Err(invalid(format!(
+                    "`{key}` must be a positive number, got {v}"
+                )));
             }
         }
         if file.ir_sensors.len() != agp_ir_count() {

@@ -276,8 +276,7 @@ impl Scenario {
     /// A built-in scenario by name.
     pub fn builtin(name: &str) -> Option<Scenario> {
         BUILTINS.iter().find(|(n, _)| *n == name).map(|(n, text)| {
-            Self::parse(text, &format!("<built-in {n}>"))
-                .expect("built-in scenarios are valid")
+            Self::parse(text, &format!("<built-in {n}>")).expect("built-in scenarios are valid")
         })
     }
 
@@ -351,7 +350,10 @@ impl Scenario {
                     return Err(err(o.shape.span(), "a circle needs `radius_mm`".into()));
                 };
                 if o.vertices_mm.is_some() {
-                    return Err(err(o.shape.span(), "a circle takes no `vertices_mm`".into()));
+                    return Err(err(
+                        o.shape.span(),
+                        "a circle takes no `vertices_mm`".into(),
+                    ));
                 }
                 positive(r, "radius_mm", &err)?;
                 ObjectShape::Circle {
@@ -436,7 +438,10 @@ fn positive<'v>(v: &'v Spanned<f64>, key: &str, err: &ErrFn) -> Result<&'v f64, 
     if x.is_finite() && x > 0.0 {
         Ok(v.get_ref())
     } else {
-        Err(err(v.span(), format!("`{key}` must be a positive number, got {x}")))
+        Err(err(
+            v.span(),
+            format!("`{key}` must be a positive number, got {x}"),
+        ))
     }
 }
 
@@ -449,16 +454,26 @@ fn non_negative<'v>(
     if x.is_finite() && x >= 0.0 {
         Ok(v.get_ref())
     } else {
-        Err(err(v.span(), format!("`{key}` must be a non-negative number, got {x}")))
+        Err(err(
+            v.span(),
+            format!("`{key}` must be a non-negative number, got {x}"),
+        ))
     }
 }
 
 fn pose(p: &Spanned<PoseFile>, key: &str, err: &ErrFn) -> Result<Pose, ScenarioLoadError> {
     let v = p.get_ref();
     if ![v.x_mm, v.y_mm, v.theta_deg].iter().all(|x| x.is_finite()) {
-        return Err(err(p.span(), format!("`{key}` holds a number that is not finite")));
+        return Err(err(
+            p.span(),
+            format!("`{key}` holds a number that is not finite"),
+        ));
     }
-    Ok(Pose::new(v.x_mm * 1e-3, v.y_mm * 1e-3, v.theta_deg.to_radians()))
+    Ok(Pose::new(
+        v.x_mm * 1e-3,
+        v.y_mm * 1e-3,
+        v.theta_deg.to_radians(),
+    ))
 }
 
 fn localization(
@@ -469,18 +484,32 @@ fn localization(
         toml::Value::String(s) if s == "off" => Ok(None),
         toml::Value::String(s) => Err(err(
             v.span(),
-            format!("`localization` is `{s}`; expected \"off\" or {{ period_s, noise_mm, noise_deg }}"),
+            format!(
+                "`localization` is `{s}`; expected \"off\" or {{ period_s, noise_mm, noise_deg }}"
+            ),
         )),
         other => {
-            let l: LocalizationFile = other
-                .clone()
-                .try_into()
-                .map_err(|e: toml::de::Error| err(v.span(), format!("`localization`: {}", e.message())))?;
+            let l: LocalizationFile = other.clone().try_into().map_err(|e: toml::de::Error| {
+                err(v.span(), format!("`localization`: {}", e.message()))
+            })?;
             if !(l.period_s.is_finite() && l.period_s > 0.0) {
-                return Err(err(v.span(), format!("`localization.period_s` must be positive, got {}", l.period_s)));
+                return Err(err(
+                    v.span(),
+                    format!(
+                        "`localization.period_s` must be positive, got {}",
+                        l.period_s
+                    ),
+                ));
             }
-            if !(l.noise_mm.is_finite() && l.noise_mm >= 0.0 && l.noise_deg.is_finite() && l.noise_deg >= 0.0) {
-                return Err(err(v.span(), "`localization` noise must be non-negative and finite".into()));
+            if !(l.noise_mm.is_finite()
+                && l.noise_mm >= 0.0
+                && l.noise_deg.is_finite()
+                && l.noise_deg >= 0.0)
+            {
+                return Err(err(
+                    v.span(),
+                    "`localization` noise must be non-negative and finite".into(),
+                ));
             }
             Ok(Some(Localization {
                 period_s: l.period_s,
@@ -514,7 +543,10 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
         Some(tol) => {
             let v = tol.get_ref();
             if !(v.mm.is_finite() && v.mm > 0.0 && v.deg.is_finite() && v.deg > 0.0) {
-                return Err(err(tol.span(), "`tolerance` must hold positive `mm` and `deg`".into()));
+                return Err(err(
+                    tol.span(),
+                    "`tolerance` must hold positive `mm` and `deg`".into(),
+                ));
             }
             (v.mm * 1e-3, v.deg.to_radians())
         }
@@ -529,25 +561,42 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
                 return Err(err(p.span(), "`path_mm` holds more than 32 points".into()));
             }
             if p.get_ref().iter().flatten().any(|x| !x.is_finite()) {
-                return Err(err(p.span(), "`path_mm` holds a number that is not finite".into()));
+                return Err(err(
+                    p.span(),
+                    "`path_mm` holds a number that is not finite".into(),
+                ));
             }
-            p.get_ref().iter().map(|q| DVec2::new(q[0], q[1]) * 1e-3).collect()
+            p.get_ref()
+                .iter()
+                .map(|q| DVec2::new(q[0], q[1]) * 1e-3)
+                .collect()
         }
         None if kind == TaskKind::Trajectory => {
-            return Err(err(t.kind.span(), "a `trajectory` task needs `path_mm`".into()));
+            return Err(err(
+                t.kind.span(),
+                "a `trajectory` task needs `path_mm`".into(),
+            ));
         }
         None => Vec::new(),
     };
     let max_pushes = match &t.max_pushes {
         Some(m) if *m.get_ref() > 0 && *m.get_ref() <= u32::MAX as i64 => *m.get_ref() as u32,
         Some(m) => {
-            return Err(err(m.span(), format!("`max_pushes` must be positive, got {}", m.get_ref())));
+            return Err(err(
+                m.span(),
+                format!("`max_pushes` must be positive, got {}", m.get_ref()),
+            ));
         }
         None => 150,
     };
     let seed = match &t.seed {
         Some(s) if *s.get_ref() >= 0 => *s.get_ref() as u64,
-        Some(s) => return Err(err(s.span(), format!("`seed` must be non-negative, got {}", s.get_ref()))),
+        Some(s) => {
+            return Err(err(
+                s.span(),
+                format!("`seed` must be non-negative, got {}", s.get_ref()),
+            ));
+        }
         None => 7,
     };
     Ok(TaskSpec {
@@ -583,14 +632,30 @@ mod tests {
         let l = Scenario::builtin("lshape").unwrap();
         assert!((l.object.shape.area() - 4.0 * 0.03 * 0.03).abs() < 1e-12);
         assert_eq!(l.object.shape.symmetry_order(), 1);
-        assert_eq!(Scenario::builtin("square").unwrap().object.shape.symmetry_order(), 4);
-        assert_eq!(Scenario::builtin("circle").unwrap().object.shape.symmetry_order(), 0);
+        assert_eq!(
+            Scenario::builtin("square")
+                .unwrap()
+                .object
+                .shape
+                .symmetry_order(),
+            4
+        );
+        assert_eq!(
+            Scenario::builtin("circle")
+                .unwrap()
+                .object
+                .shape
+                .symmetry_order(),
+            0
+        );
     }
 
     #[test]
     fn polygons_are_centred_on_their_centroid() {
         let l = Scenario::builtin("lshape").unwrap();
-        let ObjectShape::Polygon(p) = &l.object.shape else { panic!() };
+        let ObjectShape::Polygon(p) = &l.object.shape else {
+            panic!()
+        };
         assert!(p.centroid().length() < 1e-12);
     }
 }

@@ -38,14 +38,24 @@ fn write(text: &str) -> (tempfile::TempDir, PathBuf) {
 
 /// Loads `text` with `from` replaced by `to` and returns the error's line and message.
 fn refused(from: &str, to: &str) -> (usize, String) {
-    assert!(GOOD.contains(from), "test setup: `{from}` not in the good file");
+    assert!(
+        GOOD.contains(from),
+        "test setup: `{from}` not in the good file"
+    );
     let (_dir, path) = write(&GOOD.replacen(from, to, 1));
     match Scenario::load(&path) {
         Ok(_) => panic!("`{to}` was accepted"),
-        Err(ScenarioLoadError::Invalid { path: p, line, message }) => {
+        Err(ScenarioLoadError::Invalid {
+            path: p,
+            line,
+            message,
+        }) => {
             assert_eq!(p, path.display().to_string(), "the error names the file");
             let shown = Scenario::load(&path).unwrap_err().to_string();
-            assert!(shown.starts_with(&format!("{}:{line}: ", path.display())), "{shown}");
+            assert!(
+                shown.starts_with(&format!("{}:{line}: ", path.display())),
+                "{shown}"
+            );
             (line, message)
         }
         Err(other) => panic!("unexpected error kind: {other}"),
@@ -58,8 +68,13 @@ fn the_pentagon_of_the_spec_loads_as_a_user_would_write_it() {
     let s = Scenario::load(&path).expect("valid scenario");
     assert_eq!(s.name, "my-pentagon");
     assert_eq!(s.task.kind, TaskKind::Place);
-    assert!((s.task.goal.x - 0.3).abs() < 1e-12 && (s.task.goal.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
-    let ObjectShape::Polygon(p) = &s.object.shape else { panic!("a polygon") };
+    assert!(
+        (s.task.goal.x - 0.3).abs() < 1e-12
+            && (s.task.goal.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12
+    );
+    let ObjectShape::Polygon(p) = &s.object.shape else {
+        panic!("a polygon")
+    };
     assert_eq!(p.vertices().len(), 5);
     assert!(p.centroid().length() < 1e-12, "moved to its centroid");
 }
@@ -98,7 +113,10 @@ fn a_polygon_of_zero_area_is_refused() {
         "[[0, 0], [10, 0], [20, 0], [30, 0]]",
     );
     assert_eq!(line, 5);
-    assert!(msg.contains("zero area") || msg.contains("crosses itself"), "{msg}");
+    assert!(
+        msg.contains("zero area") || msg.contains("crosses itself"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -168,5 +186,8 @@ fn a_missing_file_and_an_unknown_name_are_told_apart() {
     let e = Scenario::load(std::path::Path::new("no/such/scenario.toml")).unwrap_err();
     assert!(e.to_string().contains("no/such/scenario.toml"), "{e}");
     let e = Scenario::resolve("hexagon").unwrap_err();
-    assert!(e.to_string().contains("`hexagon`") && e.to_string().contains("triangle"), "{e}");
+    assert!(
+        e.to_string().contains("`hexagon`") && e.to_string().contains("triangle"),
+        "{e}"
+    );
 }

@@ -67,7 +67,10 @@ fn main() {
 fn run() -> Result<()> {
     let args = Args::parse();
     if !(args.rate_hz.is_finite() && args.rate_hz >= 64.0 && args.rate_hz <= 100_000.0) {
-        bail!("--rate-hz must be between 64 and 100000, got {}", args.rate_hz);
+        bail!(
+            "--rate-hz must be between 64 and 100000, got {}",
+            args.rate_hz
+        );
     }
     install_shutdown_handler();
     let scenario = Scenario::resolve(&args.scenario)?;

@@ -1,0 +1,581 @@
+use agp_world::{ObjectShape, Pose, RobotDescription, Scenario, wrap_angle};
+use glam::DVec2;
+use rapier2d::math::{Pose as RPose, Vector as RVec};
+use rapier2d::prelude::{
+    CoefficientCombineRule, ColliderBuilder, ColliderHandle, MassProperties, PhysicsWorld, Ray,
+    RigidBodyBuilder, RigidBodyHandle, SharedShape,
+};
+
+use crate::convex_pieces::convex_pieces;
+use crate::drive::drive_arc;
+use crate::floor_friction::FloorFriction;
+use crate::sensors::{IR_COUNT, SensorModel, SensorState};
+
+/// Scale of the world for rapier's tolerances (its `length_unit`): our objects are a few
+/// centimetres across, so rapier's slop (0.005 units) becomes 0.05 mm and its default
+/// speculative margin (0.02 units) 0.2 mm, instead of millimetres at the metre scale. It
+/// also scales rapier's speed caps: penetrations are pushed out at up to 3 cm/s and bodies
+/// move at up to 4 m/s, thirty times the robot's top speed.
+const LENGTH_UNIT: f32 = 0.01;
+
+/// Robot and object closer than this (m) count as touching: above the contact solver's
+/// slop (0.05 mm) and its rounding, far below anything an IR reading could resolve.
+pub const CONTACT_DISTANCE: f64 = 1e-4;
+
+/// How the floor resists an object's motion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FloorModel {
+    /// Coulomb friction distributed over the footprint (robot-and-world.md): the default.
+    Coulomb {
+        /// About how many cells the footprint is cut into.
+        cells: usize,
+    },
+    /// Plain velocity damping, 1/s: cheaper, and wrong in the ways the spec names (objects
+    /// coast and turn as no real object does). Never the default.
+    Damping { linear: f64, angular: f64 },
+}
+
+impl Default for FloorModel {
+    fn default() -> Self {
+        Self::Coulomb { cells: 64 }
+    }
+}
+
+/// How to run the simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimConfig {
+    /// Physics steps per second of simulated time (default 640: ten steps per IR sample).
+    pub step_hz: f64,
+    /// Seed of the IR, odometry and overhead-fix noise.
+    pub seed: u64,
+    pub floor: FloorModel,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            step_hz: 640.0,
+            seed: 7,
+            floor: FloorModel::default(),
+        }
+    }
+}
+
+/// Why a simulation could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimBuildError {
+    /// The step rate is not finite, or slower than the IR sampling.
+    #[error(
+        "the step rate must be finite and at least the IR rate of {ir_rate_hz} Hz, got {step_hz} Hz"
+    )]
+    StepRate { step_hz: f64, ir_rate_hz: f64 },
+    /// `FloorModel::Coulomb` with no cells, or absurdly many.
+    #[error("the floor needs between 1 and 10000 footprint cells, got {0}")]
+    FootprintCells(usize),
+    /// `FloorModel::Damping` with a negative or non-finite rate.
+    #[error(
+        "floor damping must be finite and non-negative, got linear {linear}, angular {angular}"
+    )]
+    Damping { linear: f64, angular: f64 },
+    /// The robot description does not hold the 8 IR sensors the sensor state carries.
+    #[error("the robot has {0} IR sensors; the simulator reads exactly 8")]
+    SensorCount(usize),
+    /// A size, speed or rate of the robot description is not a positive number.
+    #[error("robot description: `{0}` must be a positive finite number")]
+    Robot(&'static str),
+    /// The polygon's triangulation does not cover its area (should not happen for a
+    /// polygon `agp_world::Polygon::new` accepted).
+    #[error("the object's polygon cannot be split into convex pieces")]
+    Decomposition,
+    /// A convex piece too thin for rapier to build a collider from.
+    #[error("the object's convex piece {0} is degenerate")]
+    DegeneratePiece(usize),
+}
+
+/// The world of one scenario: the E-puck, one object and the floor, stepped at a fixed
+/// rate with rapier2d (zero gravity: seen from above, the floor acts through friction).
+///
+/// # The robot's body
+/// The robot is a position-based kinematic rapier body: each step its pose follows the
+/// exact differential-drive arc of the (clamped) wheel speeds, kept in f64 by the
+/// simulator, and rapier derives the body's velocity from it for the contact solver. This
+/// is the stepper-motor E-puck: velocity-controlled wheels that reach their commanded
+/// speed, never slip sideways, and are far stronger than a 0.1 kg object's floor friction
+/// (0.4 N), so the object cannot slow the robot down. The robot's mass therefore plays no
+/// part; there are no walls to push it against.
+///
+/// # The floor
+/// Before each rapier step the floor friction's velocity change for that step is applied
+/// to the object (see [`FloorFriction::apply`]); rapier's solver then resolves the robot's
+/// contact on top of it in the same step, so a pushed object settles where the contact
+/// wrench balances the floor's, as the quasi-static pushing model has it.
+pub struct Sim {
+    scenario: Scenario,
+    robot: RobotDescription,
+    config: SimConfig,
+    world: PhysicsWorld,
+    robot_body: RigidBodyHandle,
+    object_body: RigidBodyHandle,
+    object_collider: ColliderHandle,
+    object_shape: SharedShape,
+    object_inertia: f64,
+    floor: Option<FloorFriction>,
+    dt: f64,
+    step_count: u64,
+    robot_pose: Pose,
+    wheels: (f64, f64),
+    sensors: SensorModel,
+}
+
+fn rpose(p: Pose) -> RPose {
+    RPose::new(RVec::new(p.x as f32, p.y as f32), p.theta as f32)
+}
+
+impl Sim {
+    /// Builds the world of `scenario` with `robot` at their start poses, and takes the
+    /// first sensor sample.
+    pub fn new(
+        scenario: &Scenario,
+        robot: &RobotDescription,
+        config: SimConfig,
+    ) -> Result<Sim, SimBuildError> {
+        if !(config.step_hz.is_finite() && config.step_hz >= robot.ir_rate_hz) {
+            return Err(SimBuildError::StepRate {
+                step_hz: config.step_hz,
+                ir_rate_hz: robot.ir_rate_hz,
+            });
+        }
+        for (name, v) in [
+            ("body_radius", robot.body_radius),
+            ("axle_length", robot.axle_length),
+            ("max_wheel_speed", robot.max_wheel_speed),
+            ("ir_rate_hz", robot.ir_rate_hz),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SimBuildError::Robot(name));
+            }
+        }
+        if robot.ir_sensors.len() != IR_COUNT {
+            return Err(SimBuildError::SensorCount(robot.ir_sensors.len()));
+        }
+        let (linear_damping, angular_damping) = match config.floor {
+            FloorModel::Coulomb { cells } if !(1..=10_000).contains(&cells) => {
+                return Err(SimBuildError::FootprintCells(cells));
+            }
+            FloorModel::Coulomb { .. } => (0.0, 0.0),
+            FloorModel::Damping { linear, angular } => {
+                if !(linear.is_finite() && linear >= 0.0 && angular.is_finite() && angular >= 0.0) {
+                    return Err(SimBuildError::Damping { linear, angular });
+                }
+                (linear, angular)
+            }
+        };
+
+        let dt = 1.0 / config.step_hz;
+        let obj = &scenario.object;
+        let mut world = PhysicsWorld::new();
+        world.gravity = RVec::ZERO;
+        let params = &mut world.integration_parameters;
+        params.dt = dt as f32;
+        params.length_unit = LENGTH_UNIT;
+        // The speculative margin must cover a step of the robot at full speed, or contacts
+        // would be found only after the robot has sunk into the object.
+        let travel = (2.0 * robot.max_wheel_speed * dt) as f32 / LENGTH_UNIT;
+        params.normalized_prediction_distance = params.normalized_prediction_distance.max(travel);
+        // Recycled contacts may be stale by the recycle distance: keep every step exact.
+        params.contact_recycling = false;
+
+        let robot_body = world.insert_body(
+            RigidBodyBuilder::kinematic_position_based().pose(rpose(scenario.robot.start)),
+        );
+        world.insert_collider(
+            ColliderBuilder::ball(robot.body_radius as f32)
+                .mass(robot.mass as f32)
+                .friction(obj.contact_friction as f32)
+                .friction_combine_rule(CoefficientCombineRule::Min)
+                .restitution(0.0),
+            Some(robot_body),
+        );
+
+        let (object_shape, inertia_per_mass) = object_collider_shape(&obj.shape)?;
+        let object_inertia = obj.mass * inertia_per_mass;
+        let object_body = world.insert_body(
+            RigidBodyBuilder::dynamic()
+                .pose(rpose(obj.start))
+                .can_sleep(false)
+                .linear_damping(linear_damping as f32)
+                .angular_damping(angular_damping as f32),
+        );
+        let object_collider = world.insert_collider(
+            ColliderBuilder::new(object_shape.clone())
+                .mass_properties(MassProperties::new(
+                    RVec::ZERO,
+                    obj.mass as f32,
+                    object_inertia as f32,
+                ))
+                .friction(obj.contact_friction as f32)
+                .friction_combine_rule(CoefficientCombineRule::Min)
+                .restitution(0.0),
+            Some(object_body),
+        );
+        let floor = match config.floor {
+            FloorModel::Coulomb { cells } => Some(FloorFriction::new(
+                &obj.shape,
+                obj.mass,
+                obj.floor_friction,
+                cells,
+            )),
+            FloorModel::Damping { .. } => None,
+        };
+
+        let mut sim = Sim {
+            scenario: scenario.clone(),
+            robot: robot.clone(),
+            config,
+            world,
+            robot_body,
+            object_body,
+            object_collider,
+            object_shape,
+            object_inertia,
+            floor,
+            dt,
+            step_count: 0,
+            robot_pose: scenario.robot.start,
+            wheels: (0.0, 0.0),
+            sensors: SensorModel::new(robot, &scenario.robot, config.seed),
+        };
+        let (robot_pose, object_pose) = (sim.robot_pose, sim.object_pose());
+        let (shape, range) = (&sim.object_shape, sim.sensors.max_range());
+        sim.sensors.restart(0, robot_pose, |o, d| {
+            cast_object(shape, object_pose, o, d, range)
+        });
+        Ok(sim)
+    }
+
+    /// One physics step of 1/step_hz with the given wheel speeds (m/s), each clamped to the
+    /// robot's maximum (a non-finite speed counts as 0). The simulator's own work allocates
+    /// nothing; rapier's step may (see the crate's tests).
+    pub fn step(&mut self, left_mps: f64, right_mps: f64) {
+        let travel = self.before_rapier(left_mps, right_mps);
+        self.world.step();
+        self.after_rapier(travel);
+    }
+
+    /// Drives the robot and applies the floor friction; returns the wheel travels.
+    fn before_rapier(&mut self, left_mps: f64, right_mps: f64) -> (f64, f64) {
+        let max = self.robot.max_wheel_speed;
+        let clamp = |v: f64| {
+            if v.is_finite() {
+                v.clamp(-max, max)
+            } else {
+                0.0
+            }
+        };
+        let (l, r) = (clamp(left_mps), clamp(right_mps));
+        self.wheels = (l, r);
+        let travel = (l * self.dt, r * self.dt);
+        self.robot_pose = drive_arc(self.robot_pose, travel.0, travel.1, self.robot.axle_length);
+        let next = rpose(self.robot_pose);
+        if let Some(body) = self.world.bodies.get_mut(self.robot_body) {
+            body.set_next_kinematic_position(next);
+        }
+        if let Some(floor) = &self.floor
+            && let Some(body) = self.world.bodies.get_mut(self.object_body)
+        {
+            let lv = body.linvel();
+            let mut v = DVec2::new(lv.x as f64, lv.y as f64);
+            let mut w = body.angvel() as f64;
+            let theta = body.rotation().angle() as f64;
+            floor.apply(
+                &mut v,
+                &mut w,
+                theta,
+                self.scenario.object.mass,
+                self.object_inertia,
+                self.dt,
+            );
+            body.set_linvel(RVec::new(v.x as f32, v.y as f32), false);
+            body.set_angvel(w as f32, false);
+        }
+        travel
+    }
+
+    /// Counts the step and takes the samples that fall due.
+    fn after_rapier(&mut self, travel: (f64, f64)) {
+        self.step_count += 1;
+        let (robot_pose, object_pose) = (self.robot_pose, self.object_pose());
+        let (shape, range) = (&self.object_shape, self.sensors.max_range());
+        self.sensors
+            .after_step(self.step_count, self.dt, travel, robot_pose, |o, d| {
+                cast_object(shape, object_pose, o, d, range)
+            });
+    }
+
+    /// Steps taken since construction (resets do not rewind it).
+    pub fn step_count(&self) -> u64 {
+        self.step_count
+    }
+
+    /// Simulated time since construction, s.
+    pub fn sim_time(&self) -> f64 {
+        self.step_count as f64 * self.dt
+    }
+
+    /// Length of one step, s.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// True pose of the robot, world frame.
+    pub fn robot_pose(&self) -> Pose {
+        self.robot_pose
+    }
+
+    /// True pose of the object, world frame: its centroid and orientation in (-pi, pi].
+    pub fn object_pose(&self) -> Pose {
+        match self.world.bodies.get(self.object_body) {
+            Some(b) => {
+                let p = b.position();
+                Pose::new(
+                    p.translation.x as f64,
+                    p.translation.y as f64,
+                    p.rotation.angle() as f64,
+                )
+            }
+            None => self.scenario.object.start,
+        }
+    }
+
+    /// Velocity of the object's centroid (world frame, m/s) and its angular velocity (rad/s).
+    pub fn object_velocity(&self) -> (DVec2, f64) {
+        match self.world.bodies.get(self.object_body) {
+            Some(b) => {
+                let v = b.linvel();
+                (DVec2::new(v.x as f64, v.y as f64), b.angvel() as f64)
+            }
+            None => (DVec2::ZERO, 0.0),
+        }
+    }
+
+    /// Sets the object's velocity (world frame, m/s and rad/s), as a kick would: for
+    /// experiments and tests of the floor friction.
+    pub fn set_object_velocity(&mut self, v: DVec2, omega: f64) {
+        if let Some(b) = self.world.bodies.get_mut(self.object_body) {
+            b.set_linvel(RVec::new(v.x as f32, v.y as f32), true);
+            b.set_angvel(omega as f32, true);
+        }
+    }
+
+    /// Whether the robot's body touches the object (closer than [`CONTACT_DISTANCE`]), in
+    /// the current poses. Ground truth: the robot itself has no contact sensor.
+    pub fn in_contact(&self) -> bool {
+        let o = self.object_pose();
+        let local = DVec2::from_angle(-o.theta).rotate(self.robot_pose.position() - o.position());
+        let d = self
+            .object_shape
+            .distance_to_local_point(RVec::new(local.x as f32, local.y as f32), true)
+            as f64;
+        d - self.robot.body_radius <= CONTACT_DISTANCE
+    }
+
+    /// The last sensor sample (held between samples).
+    pub fn sensors(&self) -> &SensorState {
+        self.sensors.state()
+    }
+
+    /// The wheel speeds applied at the last step, after clamping (m/s).
+    pub fn wheel_speeds(&self) -> (f64, f64) {
+        self.wheels
+    }
+
+    /// Puts the object and the robot at the given poses at rest, sets the odometry to the
+    /// robot's pose and takes an IR sample at once; the sensor clocks restart from here.
+    /// The step count and simulated time go on.
+    pub fn reset(&mut self, object: Pose, robot: Pose) {
+        let robot = Pose::new(robot.x, robot.y, wrap_angle(robot.theta));
+        self.robot_pose = robot;
+        self.wheels = (0.0, 0.0);
+        if let Some(b) = self.world.bodies.get_mut(self.robot_body) {
+            b.set_position(rpose(robot), true);
+        }
+        if let Some(b) = self.world.bodies.get_mut(self.object_body) {
+            b.set_position(rpose(object), true);
+            b.set_linvel(RVec::ZERO, true);
+            b.set_angvel(0.0, true);
+            b.reset_forces(true);
+            b.reset_torques(true);
+        }
+        let object_pose = self.object_pose();
+        let (shape, range) = (&self.object_shape, self.sensors.max_range());
+        self.sensors.restart(self.step_count, robot, |o, d| {
+            cast_object(shape, object_pose, o, d, range)
+        });
+    }
+
+    /// The robot description the world was built with.
+    pub fn robot(&self) -> &RobotDescription {
+        &self.robot
+    }
+
+    /// The scenario the world was built from.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The configuration the world was built with.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// The footprint's friction model, when the floor is [`FloorModel::Coulomb`].
+    pub fn floor_friction(&self) -> Option<&FloorFriction> {
+        self.floor.as_ref()
+    }
+
+    /// Moment of inertia of the object about its centroid, kg m^2 (uniform plate).
+    pub fn object_inertia(&self) -> f64 {
+        self.object_inertia
+    }
+
+    /// Number of convex pieces of the object's collider (1 for a convex shape).
+    pub fn object_pieces(&self) -> usize {
+        self.world
+            .colliders
+            .get(self.object_collider)
+            .and_then(|c| c.shape().as_compound())
+            .map_or(1, |c| c.shapes().len())
+    }
+}
+
+/// Distance along a world ray (unit `dir`) from `origin` to the object at `pose`, if within
+/// `range`. The ray is moved into the object's frame in f64 first, so rapier's f32
+/// geometry only ever sees centimetre-sized coordinates.
+fn cast_object(
+    shape: &SharedShape,
+    pose: Pose,
+    origin: DVec2,
+    dir: DVec2,
+    range: f64,
+) -> Option<f64> {
+    let inv = DVec2::from_angle(-pose.theta);
+    let o = inv.rotate(origin - pose.position());
+    let d = inv.rotate(dir);
+    let ray = Ray::new(
+        RVec::new(o.x as f32, o.y as f32),
+        RVec::new(d.x as f32, d.y as f32),
+    );
+    shape
+        .cast_local_ray(&ray, range as f32, true)
+        .map(|t| t as f64)
+}
+
+/// The collider shape of an object (centred on its centroid) and its moment of inertia
+/// per unit mass about the centroid, for a uniform plate.
+fn object_collider_shape(shape: &ObjectShape) -> Result<(SharedShape, f64), SimBuildError> {
+    match shape {
+        ObjectShape::Circle { radius } => {
+            Ok((SharedShape::ball(*radius as f32), radius * radius / 2.0))
+        }
+        ObjectShape::Polygon(poly) => {
+            let pieces = convex_pieces(poly).ok_or(SimBuildError::Decomposition)?;
+            let mut shapes = Vec::with_capacity(pieces.len());
+            for (k, piece) in pieces.iter().enumerate() {
+                let points = piece
+                    .iter()
+                    .map(|v| RVec::new(v.x as f32, v.y as f32))
+                    .collect();
+                let s = SharedShape::convex_polyline(points)
+                    .ok_or(SimBuildError::DegeneratePiece(k + 1))?;
+                shapes.push((RPose::IDENTITY, s));
+            }
+            let collider = if shapes.len() == 1 {
+                shapes.remove(0).1
+            } else {
+                SharedShape::compound(shapes)
+            };
+            Ok((collider, poly.inertia_per_mass()))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    thread_local! {
+        /// Allocations made by this thread: tests run in parallel, each counts its own.
+        static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    }
+
+    struct Counting;
+
+    fn count() {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+    }
+
+    // SAFETY: every call is forwarded unchanged to the system allocator.
+    unsafe impl GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            count();
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            unsafe { System.dealloc(ptr, layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            count();
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    #[global_allocator]
+    static GLOBAL: Counting = Counting;
+
+    fn allocations() -> u64 {
+        ALLOCATIONS.with(|c| c.get())
+    }
+
+    #[test]
+    fn the_simulators_own_work_in_a_step_allocates_nothing() {
+        for name in agp_world::BUILTIN_NAMES {
+            let scenario = Scenario::builtin(name).expect("built-in");
+            let mut sim = Sim::new(&scenario, &RobotDescription::epuck(), SimConfig::default())
+                .expect("builds");
+            sim.reset(Pose::default(), Pose::new(-0.08, 0.005, 0.0));
+            // Warm-up: up to the first contact, so every buffer has its working size.
+            for _ in 0..400 {
+                sim.step(0.1, 0.1);
+            }
+            assert!(sim.in_contact(), "the {name} is being pushed");
+            let (mut own, mut rapier) = (0, 0);
+            // 2 s of pushing and turning: 128 IR and odometry samples, 2 fixes.
+            let steps = 1280;
+            for k in 0..steps {
+                let turn = if k < steps / 2 { 0.0 } else { 0.02 };
+                // Rapier's modification tracking: `RigidBodySet::get_mut` pushes the body on
+                // a list that each step takes away (`mem::take`), so the first `get_mut` of a
+                // step regrows it. Touching both bodies here books that to rapier.
+                let a = allocations();
+                let _ = sim.world.bodies.get_mut(sim.robot_body);
+                let _ = sim.world.bodies.get_mut(sim.object_body);
+                let b = allocations();
+                let travel = sim.before_rapier(0.1 - turn, 0.1 + turn);
+                let c = allocations();
+                sim.world.step();
+                let d = allocations();
+                sim.after_rapier(travel);
+                let _ = sim.in_contact();
+                own += (c - b) + (allocations() - d);
+                rapier += (b - a) + (d - c);
+            }
+            eprintln!("{name}: rapier's step made {rapier} allocations in {steps} steps");
+            assert_eq!(
+                own, 0,
+                "the {name}: the simulator's own work allocated {own} times"
+            );
+        }
+    }
+}
