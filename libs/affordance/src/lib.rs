@@ -1,1 +1,27 @@
-//! Affordance gradients.
+//! Affordance gradients as math: grids, Gaussian smoothing, learning and prediction, shape matching (Algorithm 3) and the AG file; no IPC, no physics.
+
+#![warn(missing_docs)]
+
+mod affordance_gradient;
+mod affordance_learner;
+mod ag_file;
+mod gaussian_smoother;
+mod grid;
+mod shape_matcher;
+
+pub use affordance_gradient::{
+    AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE, Prediction,
+    UnknownAlphaError,
+};
+pub use affordance_learner::{
+    AffordanceLearner, LearnerBuildError, LearnerConfig, PushOutcome, SampleAddError,
+};
+pub use ag_file::{
+    AG_FILE_MAGIC, AG_FILE_VERSION, AgFileLoadError, AgFileSaveError, MAX_ALPHAS, MAX_NAME_LEN,
+};
+pub use gaussian_smoother::{GaussianSmoother, SmoothingMethod};
+pub use grid::{DEFAULT_CELL_SIZE_M, Grid, GridPayloadReadError};
+pub use shape_matcher::{
+    MIN_MATCH_POINTS, MatchMethod, MatchedPose, ShapeMatch, ShapeMatchError, ShapeMatcher,
+    ShapeMatcherBuildError, ShapeMatcherConfig,
+};

@@ -1,0 +1,378 @@
+use agp_shared_types::{GradientGrid, GridKind, Pose2};
+use glam::DVec2;
+
+use crate::Grid;
+
+/// Least interpolated push weight (sum of unit-peak Gaussians) at a contact point for
+/// [`AffordanceGradient::predict`] to answer: about one trial 2.4 sigma away.
+pub const MIN_PREDICTION_EVIDENCE: f64 = 0.05;
+
+/// Fraction of the largest value of the combined shape gradient above which
+/// [`AffordanceGradient::contact_candidates`] takes a cell for the object's border.
+pub const CONTACT_BORDER_THRESHOLD: f32 = 0.3;
+
+/// Two alphas closer than this (degrees) are the same alpha.
+pub(crate) const ALPHA_EPS_DEG: f64 = 1e-6;
+
+/// A cell whose weight is below this has no mean (its mean is written as 0).
+const MIN_CELL_WEIGHT: f32 = 1e-6;
+
+/// An alpha that is not one of the alphas an affordance gradient was learned for.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("alpha {alpha_deg} deg is not one of the learned alphas")]
+pub struct UnknownAlphaError {
+    /// The alpha asked for, degrees.
+    pub alpha_deg: f64,
+}
+
+/// The grids one alpha's layer keeps, in file order. Sums are of Gaussian-weighted values,
+/// weights of the Gaussians themselves (unit peak), so `sum / weight` is a weighted mean.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(usize)]
+pub(crate) enum LayerGrid {
+    /// S before normalisation: the sum of Gaussians at border points.
+    ShapeEvidence = 0,
+    /// Weight of every push (shared by displacement and signed rotation).
+    PushWeight,
+    /// Sum of weighted displacement x (m).
+    DisplacementX,
+    /// Sum of weighted displacement y (m).
+    DisplacementY,
+    /// Sum of weighted squared displacement length (m^2).
+    DisplacementSq,
+    /// Sum of weighted signed rotation (rad).
+    Rotation,
+    /// Sum of weighted squared rotation (rad^2).
+    RotationSq,
+    /// Sum of weighted counter-clockwise rotations (R+, rad).
+    RotationPos,
+    /// Weight of the counter-clockwise rotations.
+    RotationPosWeight,
+    /// Sum of weighted clockwise rotations (R-, rad, negative).
+    RotationNeg,
+    /// Weight of the clockwise rotations.
+    RotationNegWeight,
+}
+
+/// Number of grids in a layer.
+pub(crate) const LAYER_GRIDS: usize = 11;
+
+/// What one alpha's pushes taught.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct AlphaLayer {
+    pub(crate) alpha_deg: f64,
+    pub(crate) grids: [Grid; LAYER_GRIDS],
+    /// Largest |rotation| of a single push, rad.
+    pub(crate) max_rotation_rad: f64,
+    pub(crate) pushes: u64,
+    pub(crate) border_points: u64,
+}
+
+impl AlphaLayer {
+    pub(crate) fn new(alpha_deg: f64, cell_size_m: f64) -> Self {
+        Self {
+            alpha_deg,
+            grids: std::array::from_fn(|_| Grid::centred(cell_size_m)),
+            max_rotation_rad: 0.0,
+            pushes: 0,
+            border_points: 0,
+        }
+    }
+
+    pub(crate) fn grid(&self, g: LayerGrid) -> &Grid {
+        &self.grids[g as usize]
+    }
+
+    fn predict(&self, p: DVec2) -> Option<Prediction> {
+        let b = self.grid(LayerGrid::PushWeight).bilinear(p)?;
+        let at = |g: LayerGrid| f64::from(b.apply(self.grid(g).cells()));
+        let w = at(LayerGrid::PushWeight);
+        if w < MIN_PREDICTION_EVIDENCE {
+            return None;
+        }
+        let displacement =
+            DVec2::new(at(LayerGrid::DisplacementX), at(LayerGrid::DisplacementY)) / w;
+        let displacement_var = at(LayerGrid::DisplacementSq) / w - displacement.length_squared();
+        let rotation_rad = at(LayerGrid::Rotation) / w;
+        let rotation_var = at(LayerGrid::RotationSq) / w - rotation_rad * rotation_rad;
+        Some(Prediction {
+            displacement,
+            rotation_rad,
+            confidence: 1.0 - (-w).exp(),
+            displacement_spread_m: displacement_var.max(0.0).sqrt(),
+            rotation_spread_rad: rotation_var.max(0.0).sqrt(),
+        })
+    }
+
+    /// Writes the cells of component `kind` (normalised S or a weighted mean) into `out`.
+    fn write_cells(&self, kind: GridKind, out: &mut [f32]) {
+        let mean = |sum: LayerGrid, weight: LayerGrid, out: &mut [f32]| {
+            let (s, w) = (self.grid(sum).cells(), self.grid(weight).cells());
+            for ((o, &s), &w) in out.iter_mut().zip(s).zip(w) {
+                *o = if w > MIN_CELL_WEIGHT { s / w } else { 0.0 };
+            }
+        };
+        match kind {
+            GridKind::Shape => normalised_into(self.grid(LayerGrid::ShapeEvidence).cells(), out),
+            GridKind::PositionX => mean(LayerGrid::DisplacementX, LayerGrid::PushWeight, out),
+            GridKind::PositionY => mean(LayerGrid::DisplacementY, LayerGrid::PushWeight, out),
+            GridKind::RotationPos => {
+                mean(LayerGrid::RotationPos, LayerGrid::RotationPosWeight, out)
+            }
+            GridKind::RotationNeg => {
+                mean(LayerGrid::RotationNeg, LayerGrid::RotationNegWeight, out)
+            }
+        }
+    }
+}
+
+/// `out = cells / max(cells)` (all zeros when the max is not positive).
+fn normalised_into(cells: &[f32], out: &mut [f32]) {
+    let max = cells.iter().copied().fold(0.0_f32, f32::max);
+    if max > 0.0 {
+        let inv = 1.0 / max;
+        out.iter_mut().zip(cells).for_each(|(o, &c)| *o = c * inv);
+    } else {
+        out.fill(0.0);
+    }
+}
+
+/// What a push from a contact point is predicted to do to the object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prediction {
+    /// Displacement of the centroid, metres, in the object's frame as it was before the push.
+    pub displacement: DVec2,
+    /// Signed rotation, radians, counter-clockwise positive.
+    pub rotation_rad: f64,
+    /// `1 - exp(-w)` with `w` the interpolated push weight (about the number of trials
+    /// within one sigma), scaled by the alpha interpolation when only one side has data:
+    /// about 0.63 on top of a single trial, towards 1 with more.
+    pub confidence: f64,
+    /// Weighted standard deviation of the displacements that went into the prediction, m.
+    pub displacement_spread_m: f64,
+    /// Weighted standard deviation of the rotations that went into the prediction, rad.
+    pub rotation_spread_rad: f64,
+}
+
+impl Prediction {
+    /// The object's pose after the push, from its pose `before` (any frame).
+    pub fn apply_to(&self, before: Pose2) -> Pose2 {
+        let c = DVec2::new(before.x, before.y)
+            + DVec2::from_angle(before.theta).rotate(self.displacement);
+        Pose2::new(c.x, c.y, before.theta + self.rotation_rad)
+    }
+
+    fn lerp(&self, other: &Prediction, t: f64) -> Prediction {
+        let l = |a: f64, b: f64| a + (b - a) * t;
+        Prediction {
+            displacement: self.displacement.lerp(other.displacement, t),
+            rotation_rad: l(self.rotation_rad, other.rotation_rad),
+            confidence: l(self.confidence, other.confidence),
+            displacement_spread_m: l(self.displacement_spread_m, other.displacement_spread_m),
+            rotation_spread_rad: l(self.rotation_spread_rad, other.rotation_spread_rad),
+        }
+    }
+}
+
+/// An object's affordance gradients: for each learned alpha (the push direction's deviation
+/// from the centroid, degrees) the tuple (S, P, R+, R-) of the paper, kept as weighted sums
+/// and weights so that values are Gaussian-weighted means of the trials.
+///
+/// All grids are in the object frame (centroid at the origin, default orientation), built
+/// by [`AffordanceLearner`](crate::AffordanceLearner) and saved with
+/// [`AffordanceGradient::save`].
+///
+/// # Rotation: R+, R- and the signed prediction
+/// The paper files each push's rotation under R+ (counter-clockwise) or R- (clockwise) by
+/// its sign and shows the two. Here they are kept for that display
+/// ([`GridKind::RotationPos`], [`GridKind::RotationNeg`]: each a weighted mean of the
+/// rotations of its sign only), but predictions use a third grid: the weighted mean of the
+/// *signed* rotations of all pushes near the contact. Where both signs occur (near a
+/// corner, where a push turns the object one way or the other depending on which side of
+/// the corner it lands) the signed mean passes continuously through zero as the contact
+/// moves across the corner, as the physics does, instead of jumping between two
+/// magnitudes; how much the pushes there disagree is reported as
+/// [`Prediction::rotation_spread_rad`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct AffordanceGradient {
+    pub(crate) object_name: String,
+    pub(crate) cell_size_m: f64,
+    /// Sorted by ascending alpha.
+    pub(crate) layers: Vec<AlphaLayer>,
+}
+
+impl AffordanceGradient {
+    /// An empty gradient. `alphas_deg` must be finite and distinct (checked by the callers).
+    pub(crate) fn new(object_name: &str, alphas_deg: &[f64], cell_size_m: f64) -> Self {
+        let mut layers: Vec<AlphaLayer> = alphas_deg
+            .iter()
+            .map(|&a| AlphaLayer::new(a, cell_size_m))
+            .collect();
+        layers.sort_by(|a, b| a.alpha_deg.total_cmp(&b.alpha_deg));
+        Self {
+            object_name: object_name.to_owned(),
+            cell_size_m,
+            layers,
+        }
+    }
+
+    /// Name of the object the gradient was learned on.
+    pub fn object_name(&self) -> &str {
+        &self.object_name
+    }
+
+    /// Side of a grid cell, metres.
+    pub fn cell_size_m(&self) -> f64 {
+        self.cell_size_m
+    }
+
+    /// The learned alphas, degrees, ascending.
+    pub fn alphas_deg(&self) -> impl Iterator<Item = f64> + '_ {
+        self.layers.iter().map(|l| l.alpha_deg)
+    }
+
+    pub(crate) fn layer_index(&self, alpha_deg: f64) -> Option<usize> {
+        self.layers
+            .iter()
+            .position(|l| (l.alpha_deg - alpha_deg).abs() < ALPHA_EPS_DEG)
+    }
+
+    fn layer(&self, alpha_deg: f64) -> Result<&AlphaLayer, UnknownAlphaError> {
+        self.layer_index(alpha_deg)
+            .map(|k| &self.layers[k])
+            .ok_or(UnknownAlphaError { alpha_deg })
+    }
+
+    /// Number of pushes learned at `alpha_deg` (`None` if it is not a learned alpha).
+    pub fn push_count(&self, alpha_deg: f64) -> Option<u64> {
+        self.layer(alpha_deg).ok().map(|l| l.pushes)
+    }
+
+    /// Number of border points learned at `alpha_deg` (`None` if it is not a learned alpha).
+    pub fn border_point_count(&self, alpha_deg: f64) -> Option<u64> {
+        self.layer(alpha_deg).ok().map(|l| l.border_points)
+    }
+
+    /// Largest rotation (absolute, degrees) a single push produced at `alpha_deg`; `None` if
+    /// it is not a learned alpha or no push was learned there.
+    pub fn max_rotation_deg(&self, alpha_deg: f64) -> Option<f64> {
+        let layer = self.layer(alpha_deg).ok()?;
+        (layer.pushes > 0).then(|| layer.max_rotation_rad.to_degrees())
+    }
+
+    /// Predicts the effect of a push at `contact_point_obj` (object frame, metres) with the
+    /// push direction deviated by `alpha_deg` from the centroid, for any contact point and
+    /// any alpha between the smallest and largest learned ones.
+    ///
+    /// In space: bilinear interpolation of the weighted sums and of the weights, then their
+    /// ratio, i.e. a bilinear interpolation of the four cells' weighted means, each cell
+    /// counting by its weight. In alpha: linear between the two learned alphas around
+    /// `alpha_deg`; if only one of them has data at the point, its prediction with the
+    /// confidence scaled by its interpolation weight.
+    ///
+    /// `None` when alpha is outside the learned range, an input is not finite, or no learned
+    /// alpha around it has at least [`MIN_PREDICTION_EVIDENCE`] at the point.
+    pub fn predict(&self, contact_point_obj: DVec2, alpha_deg: f64) -> Option<Prediction> {
+        if !contact_point_obj.is_finite() || !alpha_deg.is_finite() {
+            return None;
+        }
+        let first = self.layers.first()?;
+        let last = self.layers.last()?;
+        if alpha_deg < first.alpha_deg - ALPHA_EPS_DEG || alpha_deg > last.alpha_deg + ALPHA_EPS_DEG
+        {
+            return None;
+        }
+        if let Some(k) = self.layer_index(alpha_deg) {
+            return self.layers[k].predict(contact_point_obj);
+        }
+        let hi = self.layers.iter().position(|l| l.alpha_deg > alpha_deg)?;
+        let (a, b) = (&self.layers[hi - 1], &self.layers[hi]);
+        let t = (alpha_deg - a.alpha_deg) / (b.alpha_deg - a.alpha_deg);
+        match (a.predict(contact_point_obj), b.predict(contact_point_obj)) {
+            (Some(pa), Some(pb)) => Some(pa.lerp(&pb, t)),
+            (Some(pa), None) => Some(Prediction {
+                confidence: pa.confidence * (1.0 - t),
+                ..pa
+            }),
+            (None, Some(pb)) => Some(Prediction {
+                confidence: pb.confidence * t,
+                ..pb
+            }),
+            (None, None) => None,
+        }
+    }
+
+    /// Writes component `kind` of alpha `alpha_deg` straight into `out` (typically a loaned
+    /// shared-memory sample): S normalised to [0, 1], P and R+ / R- as weighted means (0
+    /// where no push was learned). No intermediate grid.
+    pub fn write_component(
+        &self,
+        alpha_deg: f64,
+        kind: GridKind,
+        seq: u64,
+        out: &mut GradientGrid,
+    ) -> Result<(), UnknownAlphaError> {
+        let layer = self.layer(alpha_deg)?;
+        let g = layer.grid(LayerGrid::ShapeEvidence);
+        out.header = g.header(kind, layer.alpha_deg, seq);
+        layer.write_cells(kind, &mut out.cells);
+        Ok(())
+    }
+
+    /// Component `kind` of alpha `alpha_deg` as a new grid (see
+    /// [`AffordanceGradient::write_component`] for the values).
+    pub fn component(&self, alpha_deg: f64, kind: GridKind) -> Result<Grid, UnknownAlphaError> {
+        let layer = self.layer(alpha_deg)?;
+        let mut grid = layer.grid(LayerGrid::ShapeEvidence).zeros_like();
+        layer.write_cells(kind, grid.cells_mut());
+        Ok(grid)
+    }
+
+    /// The shape gradient S learned over all alphas together, normalised to [0, 1]: what
+    /// [`ShapeMatcher`](crate::ShapeMatcher) matches against.
+    pub fn combined_shape(&self) -> Grid {
+        let mut sum = Grid::centred(self.cell_size_m);
+        for layer in &self.layers {
+            sum.add_grid(layer.grid(LayerGrid::ShapeEvidence));
+        }
+        let mut out = sum.zeros_like();
+        normalised_into(sum.cells(), out.cells_mut());
+        out
+    }
+
+    /// Candidate contact points (object frame, metres) for a push search: `count` rays from
+    /// the centroid at even angles (ray k at `2 pi k / count` from +x); on each, walking in
+    /// from the grid's edge, the first band of the combined S above
+    /// [`CONTACT_BORDER_THRESHOLD`], located at its centroid (the weight of a sample being
+    /// its excess over the threshold; unlike the band's maximum, unbiased by the bilinear
+    /// interpolation between cells). Rays that meet no border are skipped, so fewer than
+    /// `count` points may come back, in angle order. Allocates (the combined S and the
+    /// result): compute once per gradient, not per push.
+    pub fn contact_candidates(&self, count: usize) -> Vec<DVec2> {
+        let shape = self.combined_shape();
+        let mut out = Vec::with_capacity(count);
+        let step = 0.25 * shape.cell_size_m();
+        let r_max = 0.5 * shape.extent_m() - shape.cell_size_m();
+        for k in 0..count {
+            let u = DVec2::from_angle(std::f64::consts::TAU * k as f64 / count as f64);
+            let mut r = r_max;
+            let mut s = shape.sample(u * r);
+            while r > 0.0 && s < CONTACT_BORDER_THRESHOLD {
+                r -= step;
+                s = shape.sample(u * r);
+            }
+            let (mut weight, mut moment) = (0.0_f64, 0.0_f64);
+            while r > 0.0 && s >= CONTACT_BORDER_THRESHOLD {
+                let w = f64::from(s - CONTACT_BORDER_THRESHOLD);
+                weight += w;
+                moment += w * r;
+                r -= step;
+                s = shape.sample(u * r);
+            }
+            if weight > 0.0 {
+                out.push(u * (moment / weight));
+            }
+        }
+        out
+    }
+}

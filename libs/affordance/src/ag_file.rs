@@ -1,0 +1,381 @@
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use agp_shared_types::{GRID_CELLS, GRID_SIDE};
+
+use crate::affordance_gradient::{AlphaLayer, LAYER_GRIDS};
+use crate::{AffordanceGradient, Grid};
+
+/// First bytes of every AG file.
+pub const AG_FILE_MAGIC: [u8; 6] = *b"AGPAG\0";
+/// The format version this code writes and reads.
+pub const AG_FILE_VERSION: u32 = 1;
+/// Largest number of alphas a file may hold.
+pub const MAX_ALPHAS: u32 = 64;
+/// Longest object name a file may hold, bytes.
+pub const MAX_NAME_LEN: u32 = 4096;
+
+const GRID_BYTES: usize = GRID_CELLS * 4;
+const LAYER_TAIL_BYTES: usize = 8 * 3;
+
+/// Why an AG file could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum AgFileSaveError {
+    /// Writing or renaming the file failed.
+    #[error("cannot write AG file `{}`", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+}
+
+/// Why an AG file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum AgFileLoadError {
+    /// The file could not be read.
+    #[error("cannot read AG file `{}`", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file does not start with [`AG_FILE_MAGIC`].
+    #[error("`{}` is not an AG file (bad magic bytes)", path.display())]
+    BadMagic {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file ends before its header says it should.
+    #[error("AG file `{}` is truncated: {len} bytes, {needed} expected", path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Its length, bytes.
+        len: usize,
+        /// The length its contents call for (so far), bytes.
+        needed: usize,
+    },
+    /// Another format version.
+    #[error("AG file `{}` has format version {found}, this build reads {AG_FILE_VERSION}", path.display())]
+    UnsupportedVersion {
+        /// The file.
+        path: PathBuf,
+        /// The version found.
+        found: u32,
+    },
+    /// Another grid side.
+    #[error("AG file `{}` holds {found} x {found} grids, this build uses {GRID_SIDE} x {GRID_SIDE}", path.display())]
+    GridSizeMismatch {
+        /// The file.
+        path: PathBuf,
+        /// The side found.
+        found: u32,
+    },
+    /// The checksum does not match the contents.
+    #[error("AG file `{}` is corrupt: checksum {stored:#018x}, contents give {computed:#018x}", path.display())]
+    ChecksumMismatch {
+        /// The file.
+        path: PathBuf,
+        /// The checksum stored in the file.
+        stored: u64,
+        /// The checksum of the contents.
+        computed: u64,
+    },
+    /// A field holds an impossible value.
+    #[error("AG file `{}` is invalid: {reason}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// FNV-1a, 64 bits.
+pub(crate) fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+impl AffordanceGradient {
+    /// Writes the gradient to `path`, through a temporary file renamed into place so a
+    /// reader never sees half a file.
+    ///
+    /// # Format
+    ///
+    /// Little-endian throughout:
+    ///
+    /// | field                 | type                      | notes                               |
+    /// |-----------------------|---------------------------|-------------------------------------|
+    /// | magic                 | 6 bytes                   | `AGPAG\0`                           |
+    /// | version               | u32                       | [`AG_FILE_VERSION`]                 |
+    /// | grid side             | u32                       | [`GRID_SIDE`]                       |
+    /// | cell_size_m           | f64                       | metres                              |
+    /// | alpha count `A`       | u32                       | 1 ..= [`MAX_ALPHAS`]                |
+    /// | alphas_deg            | `A` x f64                 | degrees, ascending                  |
+    /// | name length `L`       | u32                       | 0 ..= [`MAX_NAME_LEN`]              |
+    /// | object name           | `L` bytes                 | UTF-8                               |
+    /// | grids                 | `A` x 11 x side^2 x f32   | per alpha, row-major, see below     |
+    /// | per alpha             | `A` x (f64, u64, u64)     | max_rotation_rad, pushes, border points |
+    /// | checksum              | u64                       | FNV-1a 64 of every byte before it   |
+    ///
+    /// The 11 grids of an alpha, in order: S evidence (sum of Gaussians), push weight, then
+    /// weighted sums of displacement x (m), displacement y (m), squared displacement (m^2),
+    /// signed rotation (rad), squared rotation (rad^2), R+ (rad), then R+ weight, R- sum
+    /// (rad, negative), R- weight. Values are as in memory (SI), so a round trip is exact.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<(), AgFileSaveError> {
+        let path = path.as_ref();
+        let bytes = self.to_bytes();
+        let io = |source| AgFileSaveError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        let Some(name) = path.file_name() else {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "the path names no file",
+            )));
+        };
+        let mut tmp_name = name.to_owned();
+        tmp_name.push(".tmp");
+        let tmp = path.with_file_name(tmp_name);
+        let write = || -> std::io::Result<()> {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(&bytes)?;
+            f.sync_all()?;
+            std::fs::rename(&tmp, path)
+        };
+        write().map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io(e)
+        })
+    }
+
+    /// Reads a gradient written by [`AffordanceGradient::save`], refusing a file with bad
+    /// magic, another version or grid size, a truncated or corrupt (checksum) file, or
+    /// impossible values.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, AgFileLoadError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| AgFileLoadError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    fn to_bytes(&self) -> Vec<u8> {
+        let name = self.object_name.as_bytes();
+        let a = self.layers.len();
+        let mut out = Vec::with_capacity(
+            6 + 4
+                + 4
+                + 8
+                + 4
+                + 8 * a
+                + 4
+                + name.len()
+                + a * (LAYER_GRIDS * GRID_BYTES + LAYER_TAIL_BYTES)
+                + 8,
+        );
+        out.extend_from_slice(&AG_FILE_MAGIC);
+        out.extend_from_slice(&AG_FILE_VERSION.to_le_bytes());
+        out.extend_from_slice(&(GRID_SIDE as u32).to_le_bytes());
+        out.extend_from_slice(&self.cell_size_m.to_le_bytes());
+        out.extend_from_slice(&(a as u32).to_le_bytes());
+        for l in &self.layers {
+            out.extend_from_slice(&l.alpha_deg.to_le_bytes());
+        }
+        out.extend_from_slice(&(name.len() as u32).to_le_bytes());
+        out.extend_from_slice(name);
+        for l in &self.layers {
+            for g in &l.grids {
+                for c in g.cells() {
+                    out.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+        }
+        for l in &self.layers {
+            out.extend_from_slice(&l.max_rotation_rad.to_le_bytes());
+            out.extend_from_slice(&l.pushes.to_le_bytes());
+            out.extend_from_slice(&l.border_points.to_le_bytes());
+        }
+        let sum = fnv1a64(&out);
+        out.extend_from_slice(&sum.to_le_bytes());
+        out
+    }
+
+    fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, AgFileLoadError> {
+        let p = || path.to_owned();
+        let invalid = |reason: String| AgFileLoadError::Invalid { path: p(), reason };
+        let head = &bytes[..bytes.len().min(AG_FILE_MAGIC.len())];
+        if head != &AG_FILE_MAGIC[..head.len()] {
+            return Err(AgFileLoadError::BadMagic { path: p() });
+        }
+        let mut r = Reader {
+            bytes,
+            pos: AG_FILE_MAGIC.len(),
+            path,
+        };
+        if bytes.len() < AG_FILE_MAGIC.len() {
+            return Err(r.truncated(AG_FILE_MAGIC.len()));
+        }
+        let version = r.u32()?;
+        if version != AG_FILE_VERSION {
+            return Err(AgFileLoadError::UnsupportedVersion {
+                path: p(),
+                found: version,
+            });
+        }
+        let side = r.u32()?;
+        if side as usize != GRID_SIDE {
+            return Err(AgFileLoadError::GridSizeMismatch {
+                path: p(),
+                found: side,
+            });
+        }
+        let cell_size_m = r.f64()?;
+        let alpha_count = r.u32()?;
+        if !(1..=MAX_ALPHAS).contains(&alpha_count) {
+            return Err(invalid(format!(
+                "{alpha_count} alphas, expected 1 to {MAX_ALPHAS}"
+            )));
+        }
+        let a = alpha_count as usize;
+        let mut alphas = Vec::with_capacity(a);
+        for _ in 0..a {
+            alphas.push(r.f64()?);
+        }
+        let name_len = r.u32()?;
+        if name_len > MAX_NAME_LEN {
+            return Err(invalid(format!(
+                "object name of {name_len} bytes, at most {MAX_NAME_LEN} allowed"
+            )));
+        }
+        let name_bytes = r.take(name_len as usize)?;
+        let needed = r.pos + a * (LAYER_GRIDS * GRID_BYTES + LAYER_TAIL_BYTES) + 8;
+        if bytes.len() < needed {
+            return Err(r.truncated(needed));
+        }
+        if bytes.len() > needed {
+            return Err(invalid(format!(
+                "{} bytes after the checksum",
+                bytes.len() - needed
+            )));
+        }
+        let (body, tail) = bytes.split_at(needed - 8);
+        let mut stored = [0u8; 8];
+        stored.copy_from_slice(tail);
+        let stored = u64::from_le_bytes(stored);
+        let computed = fnv1a64(body);
+        if stored != computed {
+            return Err(AgFileLoadError::ChecksumMismatch {
+                path: p(),
+                stored,
+                computed,
+            });
+        }
+        // The checksum holds: what follows checks meaning, not integrity.
+        let object_name = std::str::from_utf8(name_bytes)
+            .map_err(|_| invalid("object name is not UTF-8".into()))?
+            .to_owned();
+        if !(cell_size_m.is_finite() && cell_size_m > 0.0) {
+            return Err(invalid(format!("cell size {cell_size_m} m")));
+        }
+        for (k, &alpha) in alphas.iter().enumerate() {
+            if !alpha.is_finite() || alphas[..k].contains(&alpha) {
+                return Err(invalid(format!(
+                    "alpha {alpha} deg is not finite or repeated"
+                )));
+            }
+        }
+        let mut layers: Vec<AlphaLayer> = alphas
+            .iter()
+            .map(|&alpha| AlphaLayer::new(alpha, cell_size_m))
+            .collect();
+        for layer in &mut layers {
+            for grid in &mut layer.grids {
+                read_grid(&mut r, grid)?;
+                if grid.cells().iter().any(|c| !c.is_finite()) {
+                    return Err(invalid(format!(
+                        "a grid of alpha {} deg holds a non-finite value",
+                        layer.alpha_deg
+                    )));
+                }
+            }
+        }
+        for layer in &mut layers {
+            layer.max_rotation_rad = r.f64()?;
+            layer.pushes = r.u64()?;
+            layer.border_points = r.u64()?;
+            if !(layer.max_rotation_rad.is_finite() && layer.max_rotation_rad >= 0.0) {
+                return Err(invalid(format!(
+                    "max rotation {} rad of alpha {} deg",
+                    layer.max_rotation_rad, layer.alpha_deg
+                )));
+            }
+        }
+        layers.sort_by(|a, b| a.alpha_deg.total_cmp(&b.alpha_deg));
+        Ok(Self {
+            object_name,
+            cell_size_m,
+            layers,
+        })
+    }
+}
+
+fn read_grid(r: &mut Reader<'_>, grid: &mut Grid) -> Result<(), AgFileLoadError> {
+    let raw = r.take(GRID_BYTES)?;
+    for (c, b) in grid.cells_mut().iter_mut().zip(raw.chunks_exact(4)) {
+        *c = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+    }
+    Ok(())
+}
+
+/// A cursor over the file's bytes whose reads fail with [`AgFileLoadError::Truncated`].
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    fn truncated(&self, needed: usize) -> AgFileLoadError {
+        AgFileLoadError::Truncated {
+            path: self.path.to_owned(),
+            len: self.bytes.len(),
+            needed,
+        }
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'a [u8], AgFileLoadError> {
+        let end = self.pos + n;
+        let bytes: &'a [u8] = self.bytes;
+        let out = bytes
+            .get(self.pos..end)
+            .ok_or_else(|| self.truncated(end))?;
+        self.pos = end;
+        Ok(out)
+    }
+
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], AgFileLoadError> {
+        let mut out = [0u8; N];
+        out.copy_from_slice(self.take(N)?);
+        Ok(out)
+    }
+
+    fn u32(&mut self) -> Result<u32, AgFileLoadError> {
+        self.array().map(u32::from_le_bytes)
+    }
+
+    fn u64(&mut self) -> Result<u64, AgFileLoadError> {
+        self.array().map(u64::from_le_bytes)
+    }
+
+    fn f64(&mut self) -> Result<f64, AgFileLoadError> {
+        self.array().map(f64::from_le_bytes)
+    }
+}
