@@ -1,11 +1,17 @@
 //! The world both physics and estimator know: the robot's description, scenarios and polygon geometry.
 
 mod geometry;
+mod ir_geometry;
 mod rng;
 mod robot;
 mod scenario;
 
-pub use geometry::{Polygon, PolygonError, point_segment_distance, ray_segment, segments_intersect, signed_area};
+pub use geometry::{
+    Polygon, PolygonError, point_segment_distance, ray_segment, segments_intersect, signed_area,
+};
+pub use ir_geometry::{
+    BORDER_MAX_SIGMA, border_range, ir_border_point, ir_point_robot, mean_ir_vector, to_frame,
+};
 pub use rng::Rng;
 pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
 pub use scenario::{

@@ -1,6 +1,6 @@
 use std::f64::consts::{FRAC_PI_2, TAU};
 
-use agp_world::{Pose, RobotDescription, border_range, ir_border_point, wrap_angle};
+use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point, to_frame, wrap_angle};
 use glam::DVec2;
 
 /// Which side of the robot the object is kept on while circling.
@@ -42,6 +42,19 @@ pub struct CircleSettings {
     /// Below this gap (m) the robot no longer moves forward while its heading points closer
     /// to the nearest border point: it only turns, which never touches.
     pub min_gap: f64,
+    /// Side-ray hits are traced over this much travel (m) to find the face's direction.
+    pub trace_travel: f64,
+    /// A trace shorter than this (m) means the side ray keeps hitting one spot while the
+    /// robot moves: it is orbiting that spot, which may be a corner's tip or a point of a
+    /// face that goes on unseen between the side ray and the 45 deg ray (the L's 30 mm
+    /// end), so the orbit is widened to `orbit_curvature`.
+    pub trace_min: f64,
+    /// Sharpest curvature (1/m) of a turn towards the object while the side ray keeps
+    /// hitting one spot. Must stay above the curvature of a round object's contour at the
+    /// set gap (1 / 82 mm for the 35 mm disc).
+    pub orbit_curvature: f64,
+    /// How far (rad) the heading may turn towards the object past the traced face.
+    pub face_margin: f64,
     /// Heading correction towards the object per metre of gap error, rad/m.
     pub gap_gain: f64,
     /// Largest heading correction the gap error may ask for, rad.
@@ -56,12 +69,17 @@ pub struct CircleSettings {
     /// The start turn (in place) ends when the heading error falls below this, rad.
     pub start_heading_error: f64,
     /// The lap closes at the closest return to the lap's start position within this
-    /// distance (m), once the heading has turned a full turn less `close_heading`.
+    /// distance (m), once the heading has turned a full turn less `close_heading`; past a
+    /// full turn, at the closest return wherever it is.
     pub close_radius: f64,
     /// Slack on the full turn of heading for the lap to close, rad.
     pub close_heading: f64,
     /// Give up after this long, seconds of simulated time.
     pub timeout: f64,
+    /// Largest standard deviation (m) of the distance a reading implies for it to give a
+    /// border point; sets the border range through the response curve (1 mm: 40 mm from
+    /// the E-puck's sensors, see [`agp_world::BORDER_MAX_SIGMA`]).
+    pub max_sigma: f64,
     /// Border points the routine keeps (preallocated); later ones are dropped and counted.
     pub capacity: usize,
 }
@@ -71,8 +89,12 @@ impl Default for CircleSettings {
         Self {
             side: Side::Left,
             gap: 0.010,
-            min_gap: 0.004,
             speed: 0.06,
+            min_gap: 0.004,
+            trace_travel: 0.012,
+            trace_min: 0.003,
+            orbit_curvature: 1.0 / 0.075,
+            face_margin: 10f64.to_radians(),
             gap_gain: 60.0,
             max_correction: 50f64.to_radians(),
             heading_gain: 8.0,
@@ -82,6 +104,7 @@ impl Default for CircleSettings {
             close_radius: 0.02,
             close_heading: 20f64.to_radians(),
             timeout: 40.0,
+            max_sigma: BORDER_MAX_SIGMA,
             capacity: 8192,
         }
     }
@@ -102,10 +125,17 @@ pub enum CircleOutcome {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum CirclePhase {
     /// Turning in place to put the object on the chosen side.
-    Turn { since: f64 },
+    Turn {
+        since: f64,
+    },
     /// Following the contour; the lap started at `since`.
-    Follow { since: f64 },
-    Done { outcome: CircleOutcome, at: f64 },
+    Follow {
+        since: f64,
+    },
+    Done {
+        outcome: CircleOutcome,
+        at: f64,
+    },
 }
 
 /// The paper's TurnAroundObjCompShape as a state machine fed one IR frame per control
@@ -114,19 +144,30 @@ pub enum CirclePhase {
 /// readings imply, in the odometry frame.
 ///
 /// # The controller
-/// Every reading within the usable range ([`agp_world::border_range`], 40 mm) gives a
-/// border point (mount + inverted distance along the ray, moved by the odometry pose);
-/// the points are kept for the lap. The controller steers by the point nearest to the
-/// body centre, of all points seen so far: it keeps that point's gap to the shell at
-/// `gap`, heading along the tangent (perpendicular to the centre-to-point line, object on
-/// the chosen side) corrected towards the object when the gap grows and away when it
-/// shrinks. On a straight face the nearest point is the side sensor's (IR3 or IR6), so
-/// this is the wall follower that holds the side reading at its set point; at an outer
-/// corner the side ray loses the face and the remembered corner becomes the pivot the
-/// robot turns round; at an inner corner (the L's) the points the front sensors (±17,
-/// ±45 deg) put on the face ahead become the nearest before the body gets there, and
-/// the robot stops going forward and turns away until it runs along the new face. The
-/// body is a disc round the wheel axle's centre, so turning in place never touches.
+/// Every reading within the border range (`max_sigma`, 1 mm by default: 40 mm from the
+/// sensor, see [`agp_world::BORDER_MAX_SIGMA`]) gives a border point: mount + inverted
+/// distance along the ray, moved by the odometry pose. Readings beyond it, up to the end
+/// of the response curve (70 mm), are too noisy for the shape but are kept for steering.
+/// The controller steers by the point nearest to the body centre of all points seen so
+/// far: it keeps that point's gap to the shell at `gap`, heading along the tangent
+/// (perpendicular to the centre-to-point line, object on the chosen side), corrected
+/// towards the object when the gap grows and away when it shrinks. So:
+/// - on a straight face the nearest point is the side sensor's (IR3 or IR6): this is the
+///   wall follower holding the side reading at its set point;
+/// - at an outer corner the side ray passes the tip and sees nothing, and the remembered
+///   corner becomes the pivot the robot turns round;
+/// - at an inner corner (the L's) the points the front sensors (±17, ±45 deg) put on the
+///   face ahead become the nearest before the body gets there: the robot stops going
+///   forward, turns away (in place: the body is a disc round the axle's centre, so turning
+///   never touches) and runs along the new face.
+///
+/// Two guards cover what no ray sees between the ±45 and ±90 deg rays. While the side ray
+/// hits a face, its hits over the last `trace_travel` of travel trace the face's
+/// direction, and the heading may not turn towards the object more than `face_margin`
+/// past it. When those hits stay on one spot while the robot moves, the robot is orbiting
+/// that spot, which is a corner's tip or a point of a face going on unseen (the L's 30 mm
+/// end): the orbit is widened to `orbit_curvature` at full speed, so the side ray slides
+/// along whatever is there.
 ///
 /// Commands are computed once per IR sample (`ir_sample` changes) and held in between.
 #[derive(Debug, Clone)]
@@ -137,6 +178,8 @@ pub struct CircleRoutine {
     phase: CirclePhase,
     started: f64,
     points: Vec<DVec2>,
+    /// Readings beyond the border range: for steering only.
+    far: Vec<DVec2>,
     dropped: usize,
     last_sample: Option<u64>,
     command: (f64, f64),
@@ -144,7 +187,31 @@ pub struct CircleRoutine {
     turned: f64,
     lap_start: DVec2,
     closest: f64,
+    /// Odometry path length so far, m, and the position it was last measured at.
+    travel: f64,
+    last_pos: DVec2,
+    /// The side ray's recent hits (odometry frame) with the travel they were seen at; a
+    /// sample where the side ray sees nothing empties it.
+    side_hits: [(DVec2, f64); SIDE_HITS],
+    side_hit_count: usize,
+    side_hit_next: usize,
 }
+
+/// How much farther than its closest (m) the robot must be from the lap's start for the
+/// lap to count as past it: above odometry's jitter between two samples.
+const CLOSE_HYSTERESIS: f64 = 0.0005;
+
+/// What the side ray's recent hits say about the surface beside the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum FaceTrace {
+    /// The hits run along a face in this direction (rad, odometry frame).
+    Along(f64),
+    /// The hits stay on one spot while the robot moves round it.
+    Orbiting,
+}
+
+/// Side-ray hits kept for tracing a face (over a second at the IR rate).
+const SIDE_HITS: usize = 96;
 
 impl CircleRoutine {
     /// A routine starting at time `now`. Allocates the point buffer here, never later.
@@ -152,10 +219,11 @@ impl CircleRoutine {
         Self {
             settings,
             robot: robot.clone(),
-            range: border_range(robot),
+            range: robot.response.usable_range(settings.max_sigma),
             phase: CirclePhase::Turn { since: now },
             started: now,
             points: Vec::with_capacity(settings.capacity),
+            far: Vec::with_capacity(settings.capacity),
             dropped: 0,
             last_sample: None,
             command: (0.0, 0.0),
@@ -163,6 +231,11 @@ impl CircleRoutine {
             turned: 0.0,
             lap_start: DVec2::ZERO,
             closest: f64::INFINITY,
+            travel: 0.0,
+            last_pos: DVec2::ZERO,
+            side_hits: [(DVec2::ZERO, 0.0); SIDE_HITS],
+            side_hit_count: 0,
+            side_hit_next: 0,
         }
     }
 
@@ -179,7 +252,7 @@ impl CircleRoutine {
         &self.points
     }
 
-    /// Points that did not fit in the buffer.
+    /// Points (border or steering) that did not fit in their buffers.
     pub fn dropped_points(&self) -> usize {
         self.dropped
     }
@@ -208,7 +281,13 @@ impl CircleRoutine {
 
     /// Wheel speeds (left, right, m/s) for this step, given the frame's time, its IR
     /// sample count, the odometry pose and the raw IR readings.
-    pub fn update(&mut self, now: f64, ir_sample: u64, odometry: Pose, ir_raw: &[f32; 8]) -> (f64, f64) {
+    pub fn update(
+        &mut self,
+        now: f64,
+        ir_sample: u64,
+        odometry: Pose,
+        ir_raw: &[f32; 8],
+    ) -> (f64, f64) {
         if let CirclePhase::Done { .. } = self.phase {
             return (0.0, 0.0);
         }
@@ -224,7 +303,12 @@ impl CircleRoutine {
             self.turned += self.settings.side.sign() * wrap_angle(odometry.theta - self.last_theta);
         }
         self.last_theta = odometry.theta;
+        if !first {
+            self.travel += (odometry.position() - self.last_pos).length();
+        }
+        self.last_pos = odometry.position();
         self.collect(odometry, ir_raw);
+        let face = self.face_direction(odometry, ir_raw);
 
         let pos = odometry.position();
         let Some(nearest) = self.nearest(pos) else {
@@ -233,7 +317,10 @@ impl CircleRoutine {
             if now - self.started > search_time {
                 return self.finish(CircleOutcome::Lost, now);
             }
-            return self.drive(0.0, -self.settings.side.sign() * self.settings.max_turn_rate);
+            return self.drive(
+                0.0,
+                -self.settings.side.sign() * self.settings.max_turn_rate,
+            );
         };
 
         let s = &self.settings;
@@ -243,10 +330,20 @@ impl CircleRoutine {
         let gap = rho - self.robot.body_radius;
         // Tangent with the object on `side`: the outward normal turned a quarter towards
         // the direction of travel.
-        let normal = if rho > 1e-9 { away / rho } else { DVec2::from_angle(odometry.theta + side * -FRAC_PI_2) };
+        let normal = if rho > 1e-9 {
+            away / rho
+        } else {
+            DVec2::from_angle(odometry.theta + side * -FRAC_PI_2)
+        };
         let tangent = DVec2::from_angle(side * FRAC_PI_2).rotate(normal);
         let correction = (s.gap_gain * (gap - s.gap)).clamp(-s.max_correction, s.max_correction);
-        let desired = tangent.to_angle() + side * correction;
+        let mut desired = tangent.to_angle() + side * correction;
+        if let Some(FaceTrace::Along(face)) = face {
+            let over = side * wrap_angle(desired - face) - s.face_margin;
+            if over > 0.0 {
+                desired -= side * over;
+            }
+        }
         let error = wrap_angle(desired - odometry.theta);
         let omega = (s.heading_gain * error).clamp(-s.max_turn_rate, s.max_turn_rate);
 
@@ -263,14 +360,15 @@ impl CircleRoutine {
             }
             CirclePhase::Follow { .. } => {
                 if self.turned >= TAU - s.close_heading {
+                    // Close at the closest return to the lap's start: within `close_radius`
+                    // once nearly a full turn is done, or wherever it is once the full
+                    // turn is done (a start deep in an inner corner is off the path).
                     let d = (pos - self.lap_start).length();
-                    if d <= s.close_radius {
-                        if d > self.closest {
-                            return self.finish(CircleOutcome::Closed, now);
-                        }
-                        self.closest = d;
-                    } else if self.closest.is_finite() || self.turned >= TAU + FRAC_PI_2 {
-                        // Left the closing circle again, or far past a full turn.
+                    self.closest = self.closest.min(d);
+                    let receding = d > self.closest + CLOSE_HYSTERESIS;
+                    let near = self.closest <= s.close_radius;
+                    if (receding && (near || self.turned >= TAU)) || self.turned >= TAU + FRAC_PI_2
+                    {
                         return self.finish(CircleOutcome::Closed, now);
                     }
                 }
@@ -284,6 +382,19 @@ impl CircleRoutine {
         } else {
             s.speed * (1.0 - error.abs() / s.stop_heading_error).clamp(0.0, 1.0)
         };
+        let (v, omega) =
+            if face == Some(FaceTrace::Orbiting) && side * omega > v * s.orbit_curvature {
+                // Widen the orbit at full speed, so the side ray slides along what it hits.
+                let v = if gap < s.min_gap && closing {
+                    0.0
+                } else {
+                    s.speed
+                };
+                let limit = v.max(0.25 * s.speed) * s.orbit_curvature;
+                (v, side * (side * omega).min(limit))
+            } else {
+                (v, omega)
+            };
         self.drive(v, omega)
     }
 
@@ -308,21 +419,63 @@ impl CircleRoutine {
         self.command
     }
 
+    /// Readings within the border range become border points; farther ones (to the end
+    /// of the curve) are too noisy for the shape but still steer: they show a face or a
+    /// corner ahead before it comes within the border range.
     fn collect(&mut self, odometry: Pose, ir_raw: &[f32; 8]) {
+        let max_range = self.robot.response.max_range();
         for (i, &raw) in ir_raw.iter().enumerate() {
-            if let Some(p) = ir_border_point(&self.robot, odometry, i, raw as f64, self.range) {
-                if self.points.len() < self.points.capacity() {
-                    self.points.push(p);
-                } else {
-                    self.dropped += 1;
-                }
+            let Some(p) = ir_border_point(&self.robot, odometry, i, raw as f64, max_range) else {
+                continue;
+            };
+            let sensor_distance = (p - to_frame(odometry, self.robot.ir_sensors[i].mount)).length();
+            let buffer = if sensor_distance <= self.range {
+                &mut self.points
+            } else {
+                &mut self.far
+            };
+            if buffer.len() < buffer.capacity() {
+                buffer.push(p);
+            } else {
+                self.dropped += 1;
             }
+        }
+    }
+
+    /// Records this sample's side-ray hit and traces the face it is on, from the hit
+    /// `trace_travel` of travel ago to this one. `None` when the side ray sees nothing now
+    /// or has not traced long enough.
+    fn face_direction(&mut self, odometry: Pose, ir_raw: &[f32; 8]) -> Option<FaceTrace> {
+        let sensor = self.settings.side.sensor();
+        let Some(hit) = ir_border_point(
+            &self.robot,
+            odometry,
+            sensor,
+            ir_raw[sensor] as f64,
+            self.range,
+        ) else {
+            self.side_hit_count = 0;
+            return None;
+        };
+        self.side_hits[self.side_hit_next] = (hit, self.travel);
+        self.side_hit_next = (self.side_hit_next + 1) % SIDE_HITS;
+        self.side_hit_count = (self.side_hit_count + 1).min(SIDE_HITS);
+        let old = (1..self.side_hit_count)
+            .map(|k| self.side_hits[(self.side_hit_next + SIDE_HITS - 1 - k) % SIDE_HITS])
+            .find(|&(_, t)| self.travel - t >= self.settings.trace_travel)?;
+        let trace = hit - old.0;
+        let heading = DVec2::from_angle(odometry.theta);
+        if trace.length() < self.settings.trace_min || trace.dot(heading) <= 0.0 {
+            Some(FaceTrace::Orbiting)
+        } else {
+            Some(FaceTrace::Along(trace.to_angle()))
         }
     }
 
     fn nearest(&self, pos: DVec2) -> Option<DVec2> {
         self.points
             .iter()
+            .chain(&self.far)
             .copied()
             .min_by(|a, b| a.distance_squared(pos).total_cmp(&b.distance_squared(pos)))
     }
@@ -407,6 +560,39 @@ mod tests {
     }
 
     #[test]
+    fn a_side_ray_that_keeps_hitting_one_spot_widens_the_orbit_round_it() {
+        let robot = RobotDescription::epuck();
+        let mut r = routine();
+        let s = *r.settings();
+        // The robot runs a 50 mm circle counter-clockwise round a spot at the origin, IR3
+        // looking straight at it: the readings never change while the robot moves on.
+        let radius = 0.050;
+        let mut raw = [0f32; 8];
+        raw[2] = robot.response.reading(radius - 0.031) as f32;
+        let step = s.speed / robot.ir_rate_hz;
+        let mut last = (0.0, 0.0);
+        for k in 0..40u64 {
+            let phi = -FRAC_PI_2 + k as f64 * step / radius;
+            let pose = Pose::new(radius * phi.cos(), radius * phi.sin(), phi + FRAC_PI_2);
+            last = r.update(k as f64 / robot.ir_rate_hz, k, pose, &raw);
+        }
+        let (l, rr) = last;
+        let v = 0.5 * (l + rr);
+        let curvature = (rr - l) / robot.axle_length / v;
+        // An orbit at 50 mm has curvature 20 /m; once 12 mm are traced the routine holds
+        // to the widened orbit (13.3 /m) at full speed.
+        assert!((v - s.speed).abs() < 1e-9, "speed {v}");
+        assert!(
+            curvature <= s.orbit_curvature + 1e-9,
+            "curvature {curvature} /m"
+        );
+        assert!(
+            curvature > 0.0,
+            "still turning towards the object: {curvature} /m"
+        );
+    }
+
+    #[test]
     fn the_routine_stops_at_its_timeout() {
         let robot = RobotDescription::epuck();
         let settings = CircleSettings {
@@ -426,7 +612,10 @@ mod tests {
         };
         assert_eq!(outcome, CircleOutcome::Timeout);
         assert!((at - 11.0).abs() <= 1.0 / 64.0 + 1e-12, "stopped at {at}");
-        assert_eq!(r.update(12.0, 500, Pose::new(0.0, 0.0, 0.0), &raw), (0.0, 0.0));
+        assert_eq!(
+            r.update(12.0, 500, Pose::new(0.0, 0.0, 0.0), &raw),
+            (0.0, 0.0)
+        );
     }
 
     #[test]

@@ -20,7 +20,9 @@ impl ContactSense {
             let s = &robot.ir_sensors[i];
             let (m, d) = (s.mount, s.direction());
             let md = m.dot(d);
-            -md + (md * md - m.length_squared() + robot.body_radius * robot.body_radius).max(0.0).sqrt()
+            -md + (md * md - m.length_squared() + robot.body_radius * robot.body_radius)
+                .max(0.0)
+                .sqrt()
         });
         Self {
             robot: robot.clone(),

@@ -59,7 +59,10 @@ fn run() -> Result<()> {
     match args.mode {
         Mode::Script => {
             if args.clock != "lockstep" {
-                bail!("the scripted drive needs the lockstep clock, not `{}`", args.clock);
+                bail!(
+                    "the scripted drive needs the lockstep clock, not `{}`",
+                    args.clock
+                );
             }
             script(&instance, &scenario, &args)
         }
@@ -69,11 +72,12 @@ fn run() -> Result<()> {
 fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
     let robot = RobotDescription::epuck();
     let sense = ContactSense::new(&robot);
-    let mut driver = match LockstepDriver::connect(instance, "planner", 0, false, Duration::from_secs(30)) {
-        Ok(d) => d,
-        Err(DriveError::Shutdown) => return Ok(()),
-        Err(e) => return Err(e).context("cannot reach physics"),
-    };
+    let mut driver =
+        match LockstepDriver::connect(instance, "planner", 0, false, Duration::from_secs(30)) {
+            Ok(d) => d,
+            Err(DriveError::Shutdown) => return Ok(()),
+            Err(e) => return Err(e).context("cannot reach physics"),
+        };
     let settings = PushSettings {
         push_duration: args.push_ms as f64 * 1e-3,
         ..PushSettings::default()
@@ -89,7 +93,10 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
         let (x, y) = (obj.x + radius * side.cos(), obj.y + radius * side.sin());
         let heading = wrap_angle(side + std::f64::consts::PI);
         // The learning phase puts the object back before each trial; so does the script.
-        let frame = match driver.reset(Pose2::new(obj.x, obj.y, obj.theta), Pose2::new(x, y, heading)) {
+        let frame = match driver.reset(
+            Pose2::new(obj.x, obj.y, obj.theta),
+            Pose2::new(x, y, heading),
+        ) {
             Ok(f) => *f,
             Err(DriveError::Shutdown) => return Ok(()),
             Err(e) => return Err(e.into()),
@@ -107,7 +114,11 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
                     k + 1,
                     args.pushes,
                     side.to_degrees(),
-                    if contact { "contact inferred from IR" } else { "no contact" },
+                    if contact {
+                        "contact inferred from IR"
+                    } else {
+                        "no contact"
+                    },
                     peak,
                     (odo.x - start_odo.x).hypot(odo.y - start_odo.y) * 1e3
                 );
