@@ -1,0 +1,18 @@
+//! The estimator's logic, free of shared memory: the learning phase of affordance gradients from IR frames (contact point, shape, pose by circling).
+
+#![warn(missing_docs)]
+
+mod contact_estimator;
+mod ir_view;
+mod learning_session;
+mod trial_recorder;
+
+pub use contact_estimator::{ContactEstimates, ContactEstimator, ContactMethod, LearnedShape};
+pub use ir_view::IrView;
+pub use learning_session::{
+    LearningConfig, LearningSession, SessionBuildError, ShapeLearnError, TrialLearnError,
+    TrialStartError,
+};
+pub use trial_recorder::{
+    TrialFinishError, TrialOrderError, TrialPhase, TrialRecord, TrialRecorder,
+};

@@ -1,0 +1,909 @@
+//! The learning phase run in-process against `agp_physics::Sim`, and its evaluation.
+//!
+//! Shared by `tests/learning_phase.rs` and `examples/learn_report.rs` (included with
+//! `#[path]`). The estimator (`LearningSession`) sees only IR frames and odometry; this
+//! harness plays the planner (approach, push, circle) and the evaluation, which reads the
+//! simulator's ground truth.
+
+#![allow(dead_code)]
+
+use std::f64::consts::{PI, TAU};
+use std::time::Instant;
+
+use agp_affordance::{AffordanceGradient, AffordanceLearner, PushOutcome};
+use agp_estimator::{
+    ContactEstimates, ContactMethod, IrView, LearningConfig, LearningSession, TrialRecord,
+};
+use agp_physics::{Sim, SimConfig};
+use agp_planner::{
+    CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase, PushRoutine, PushSettings,
+};
+use agp_world::{ObjectShape, Pose, Rng, RobotDescription, Scenario, wrap_angle};
+use glam::DVec2;
+
+/// The paper's largest single-push rotations for the triangle, degrees, per alpha.
+pub const PAPER_TRIANGLE_MAX_ROTATION_DEG: [(f64, f64); 3] =
+    [(0.0, 39.51), (15.0, 59.06), (-15.0, 79.78)];
+
+/// How the learning phase and its evaluation are run.
+#[derive(Debug, Clone)]
+pub struct HarnessConfig {
+    /// Seed of the simulator's noise and of the evaluation's random pushes.
+    pub seed: u64,
+    /// Alphas of the trials, degrees.
+    pub alphas_deg: Vec<f64>,
+    /// Trials per alpha, evenly spread round the object (60: one every 6 deg).
+    pub trials_per_alpha: usize,
+    /// Unseen pushes of the prediction check.
+    pub eval_pushes: usize,
+    /// Approach and push. The default pushes for 0.5 s at 100 mm/s (about 40 mm): the
+    /// push duration is the one free parameter of the protocol, and 0.5 s gives the
+    /// paper's largest A0 rotation of the triangle (39.51 deg) within a degree; 1 s gives
+    /// 54 deg, the planner's default of 2 s 77 deg and up to 121 deg at alpha 15.
+    pub push: PushSettings,
+    /// The circling after each push (and the shape circling).
+    pub circle: CircleSettings,
+    /// Robot start: on a circle this far (m) outside the object's farthest point plus the
+    /// robot's radius.
+    pub start_margin_m: f64,
+    /// After a push the robot backs off this long (s) at `backoff_speed` before circling.
+    pub backoff_s: f64,
+    /// Reverse speed of the back-off, m/s.
+    pub backoff_speed: f64,
+    /// The contact point the session's gradient is keyed by.
+    pub contact_method: ContactMethod,
+    /// Whether approach points refine S.
+    pub approach_refines_shape: bool,
+}
+
+impl Default for HarnessConfig {
+    fn default() -> Self {
+        Self {
+            seed: 7,
+            alphas_deg: vec![0.0, 15.0, -15.0],
+            trials_per_alpha: 60,
+            eval_pushes: 200,
+            push: PushSettings {
+                push_duration: 0.5,
+                ..PushSettings::default()
+            },
+            circle: CircleSettings::default(),
+            start_margin_m: 0.02,
+            backoff_s: 0.15,
+            backoff_speed: 0.08,
+            contact_method: ContactMethod::default(),
+            approach_refines_shape: true,
+        }
+    }
+}
+
+/// Ground truth of one push, object frame before the push.
+#[derive(Debug, Clone, Copy)]
+pub struct PushTruth {
+    /// Where the robot's disc first touched the object.
+    pub touch_obj: Option<DVec2>,
+    /// Where the robot's heading line met the object at that moment.
+    pub aim_obj: Option<DVec2>,
+    /// Displacement of the centroid.
+    pub displacement_obj: DVec2,
+    /// Rotation, rad.
+    pub rotation_rad: f64,
+    /// The object's pose after the push (world frame).
+    pub after: Pose,
+}
+
+/// One learning trial: what the estimator made of it, and the truth.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialOutcome {
+    pub alpha_deg: f64,
+    pub trial_angle_deg: f64,
+    pub record: Option<TrialRecord>,
+    pub truth: PushTruth,
+}
+
+/// Medians (and 90th percentiles) of a sample.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Spread {
+    pub n: usize,
+    pub median: f64,
+    pub p90: f64,
+}
+
+impl Spread {
+    pub fn of(values: &mut [f64]) -> Self {
+        if values.is_empty() {
+            return Self {
+                n: 0,
+                median: f64::NAN,
+                p90: f64::NAN,
+            };
+        }
+        values.sort_by(f64::total_cmp);
+        let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
+        Self {
+            n: values.len(),
+            median: at(0.5),
+            p90: at(0.9),
+        }
+    }
+}
+
+/// How well a gradient predicts the unseen pushes.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PredictionStats {
+    /// Pushes evaluated (contact made).
+    pub pushes: usize,
+    /// Pushes the gradient had no prediction for (no evidence at the contact point).
+    pub unpredicted: usize,
+    pub displacement_error_mm: Spread,
+    pub displacement_error_ratio: Spread,
+    pub rotation_error_deg: Spread,
+    pub true_displacement_mm: Spread,
+    pub true_rotation_abs_deg: Spread,
+}
+
+/// Everything measured on one object.
+#[derive(Debug, Clone)]
+pub struct ObjectReport {
+    pub name: String,
+    pub symmetry_order: u32,
+    pub alphas_deg: Vec<f64>,
+    pub push_duration_s: f64,
+    pub shape_points: usize,
+    /// How far the object moved during the shape circling (it should not), mm.
+    pub shape_circling_moved_object_mm: f64,
+    pub trials: usize,
+    pub learned: usize,
+    pub no_contact: usize,
+    pub rejected: usize,
+    pub circle_timeouts: usize,
+    /// (alpha, largest |rotation| in the learned AG, the true largest), degrees.
+    pub max_rotation_deg: Vec<(f64, f64, f64)>,
+    /// Pose from one circling: position error (mm).
+    pub pose_position_mm: Spread,
+    /// Orientation error modulo the symmetry (deg); `None` for a disc.
+    pub pose_orientation_deg: Option<Spread>,
+    /// Learned rotations whose symmetric branch was resolved wrongly (off by more than
+    /// a quarter period from the truth).
+    pub wrong_branch: usize,
+    /// Error of the learned rotation against the true one, deg (orientation after the
+    /// branch was resolved).
+    pub learned_rotation_error_deg: Spread,
+    /// Contact point errors (mm) per method: FrontIrMean and BodySweep against the true
+    /// touch point, HeadingLine against the true aim point.
+    pub contact_error_mm: Vec<(ContactMethod, Spread)>,
+    /// Prediction of unseen pushes by the session's gradient.
+    pub prediction: PredictionStats,
+    /// The same with gradients keyed by each method (learned from the same trials).
+    pub prediction_by_method: Vec<(ContactMethod, PredictionStats)>,
+    /// The same with a gradient learned from the truth (true aim points and effects of
+    /// the same trials), queried at the true aim points: the representation's own limit.
+    pub prediction_truth_learned: PredictionStats,
+    /// Rotation error of the session's gradient for pushes whose alpha lies within
+    /// 0-2.5, 2.5-5 and over 5 deg of the nearest learned alpha.
+    pub rotation_error_by_alpha_gap_deg: [Spread; 3],
+    /// The matcher's border (S of the first circling) against the true border.
+    pub initial_shape: ShapeQuality,
+    /// The border of the final combined S (what the AG file carries).
+    pub final_shape: ShapeQuality,
+    pub learning_sim_time_s: f64,
+    pub learning_wall_s: f64,
+    pub eval_sim_time_s: f64,
+    pub eval_wall_s: f64,
+    pub gradient: AffordanceGradient,
+}
+
+/// A learned border (ridge points of S) against the true one.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ShapeQuality {
+    /// Ridge points.
+    pub points: usize,
+    /// Distance of the ridge points to the true border, mm.
+    pub error_mm: Spread,
+    /// Fraction of the true border (sampled every mm) within 2 mm of a ridge point.
+    pub coverage: f64,
+}
+
+fn shape_quality(shape: &ObjectShape, ridge: &[DVec2]) -> ShapeQuality {
+    let mut err: Vec<f64> = ridge
+        .iter()
+        .map(|&p| (nearest_border_point(shape, p) - p).length() * 1e3)
+        .collect();
+    let border: Vec<DVec2> = match shape {
+        ObjectShape::Circle { radius } => {
+            let n = (TAU * radius / 0.001).ceil() as usize;
+            (0..n)
+                .map(|k| DVec2::from_angle(TAU * k as f64 / n as f64) * *radius)
+                .collect()
+        }
+        ObjectShape::Polygon(poly) => poly
+            .edges()
+            .flat_map(|(a, b)| {
+                let n = ((b - a).length() / 0.001).ceil() as usize;
+                (0..n).map(move |k| a + (b - a) * (k as f64 / n as f64))
+            })
+            .collect(),
+    };
+    let covered = border
+        .iter()
+        .filter(|&&b| {
+            ridge
+                .iter()
+                .any(|&p| p.distance_squared(b) <= 0.002 * 0.002)
+        })
+        .count();
+    ShapeQuality {
+        points: ridge.len(),
+        error_mm: Spread::of(&mut err),
+        coverage: covered as f64 / border.len().max(1) as f64,
+    }
+}
+
+/// Point on the shape's border nearest to `p` (object frame).
+pub fn nearest_border_point(shape: &ObjectShape, p: DVec2) -> DVec2 {
+    match shape {
+        ObjectShape::Circle { radius } => p.normalize_or(DVec2::X) * *radius,
+        ObjectShape::Polygon(poly) => poly
+            .edges()
+            .map(|(a, b)| {
+                let ab = b - a;
+                let t = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
+                a + ab * t
+            })
+            .min_by(|a, b| a.distance_squared(p).total_cmp(&b.distance_squared(p)))
+            .unwrap_or(p),
+    }
+}
+
+/// First crossing of the ray `origin + t dir` with the shape's border (object frame).
+pub fn ray_hit(shape: &ObjectShape, origin: DVec2, dir: DVec2) -> Option<DVec2> {
+    let t = match shape {
+        ObjectShape::Polygon(poly) => poly.ray_cast(origin, dir, 1.0)?,
+        ObjectShape::Circle { radius } => {
+            let b = origin.dot(dir);
+            let c = origin.length_squared() - radius * radius;
+            let disc = b * b - c;
+            if disc < 0.0 {
+                return None;
+            }
+            let t = -b - disc.sqrt();
+            if t < 0.0 {
+                return None;
+            }
+            t
+        }
+    };
+    Some(origin + dir * t)
+}
+
+fn to_object_frame(object: Pose, p: DVec2) -> DVec2 {
+    DVec2::from_angle(-object.theta).rotate(p - object.position())
+}
+
+fn view(sim: &Sim) -> IrView {
+    let s = sim.sensors();
+    IrView::new(s.ir_sample, s.ir_raw, s.odometry)
+}
+
+/// The robot on a circle of radius `r` round the object at angle `phi` (world, from the
+/// centroid), facing the centroid turned by `alpha`.
+fn start_pose(object: Pose, r: f64, phi: f64, alpha: f64) -> Pose {
+    let c = object.position() + DVec2::from_angle(phi) * r;
+    Pose::new(c.x, c.y, wrap_angle(phi + PI + alpha))
+}
+
+/// What one push did, seen by the harness.
+struct PushRun {
+    /// The frame at which contact was inferred, if it was.
+    contact_view: Option<IrView>,
+    /// The frame at which the push ended.
+    end_view: Option<IrView>,
+    touch_obj: Option<DVec2>,
+    aim_obj: Option<DVec2>,
+}
+
+/// Runs approach and push from the current state; `on_frame` sees every frame (the
+/// estimator's feed), `on_contact` the frame of the inferred contact.
+fn run_push(
+    sim: &mut Sim,
+    sense: &ContactSense,
+    settings: PushSettings,
+    mut on_frame: impl FnMut(&IrView),
+    mut on_contact: impl FnMut(&IrView),
+) -> PushRun {
+    let shape = sim.scenario().object.shape.clone();
+    let mut routine = PushRoutine::new(settings, sim.sim_time());
+    let mut run = PushRun {
+        contact_view: None,
+        end_view: None,
+        touch_obj: None,
+        aim_obj: None,
+    };
+    loop {
+        let v = view(sim);
+        on_frame(&v);
+        let before = routine.phase();
+        let (l, r) = routine.update(sense, sim.sim_time(), v.ir_sample, &v.ir_raw);
+        let after = routine.phase();
+        if matches!(before, PushPhase::Approach { .. }) && matches!(after, PushPhase::Push { .. }) {
+            run.contact_view = Some(v);
+            on_contact(&v);
+        }
+        if let PushPhase::Done { contact } = after {
+            if contact {
+                run.end_view = Some(v);
+            }
+            return run;
+        }
+        sim.step(l, r);
+        if run.touch_obj.is_none() && sim.in_contact() {
+            let o = sim.object_pose();
+            let rp = sim.robot_pose();
+            let c = to_object_frame(o, rp.position());
+            run.touch_obj = Some(nearest_border_point(&shape, c));
+            let d = DVec2::from_angle(rp.theta - o.theta);
+            run.aim_obj = ray_hit(&shape, c, d);
+        }
+    }
+}
+
+/// Drives forward until the front gap is at most `gap` (or `timeout` s pass).
+fn approach_to_gap(
+    sim: &mut Sim,
+    sense: &ContactSense,
+    gap: f64,
+    speed: f64,
+    timeout: f64,
+    mut on_frame: impl FnMut(&IrView),
+) -> bool {
+    let t0 = sim.sim_time();
+    while sim.sim_time() - t0 < timeout {
+        let v = view(sim);
+        on_frame(&v);
+        if sense.front_gap(&v.ir_raw).is_some_and(|g| g <= gap) {
+            return true;
+        }
+        sim.step(speed, speed);
+    }
+    false
+}
+
+/// Runs a circling to its end; returns whether the lap closed.
+fn run_circle(
+    sim: &mut Sim,
+    robot: &RobotDescription,
+    settings: CircleSettings,
+    mut on_frame: impl FnMut(&IrView),
+) -> bool {
+    let mut routine = CircleRoutine::new(settings, robot, sim.sim_time());
+    loop {
+        let v = view(sim);
+        on_frame(&v);
+        let (l, r) = routine.update(sim.sim_time(), v.ir_sample, v.odometry, &v.ir_raw);
+        if let CirclePhase::Done { outcome, .. } = routine.phase() {
+            return outcome == agp_planner::CircleOutcome::Closed;
+        }
+        sim.step(l, r);
+    }
+}
+
+fn hold(sim: &mut Sim, seconds: f64, speed: f64, mut on_frame: impl FnMut(&IrView)) {
+    let t0 = sim.sim_time();
+    while sim.sim_time() - t0 < seconds {
+        on_frame(&view(sim));
+        sim.step(speed, speed);
+    }
+}
+
+/// Angle between `a` and `b` modulo `period`, in [0, period / 2].
+fn angle_distance(a: f64, b: f64, period: f64) -> f64 {
+    let d = (a - b).rem_euclid(period);
+    d.min(period - d)
+}
+
+/// Runs the learning phase of built-in object `name` and evaluates it.
+pub fn run_object(name: &str, cfg: &HarnessConfig) -> ObjectReport {
+    let scenario = Scenario::builtin(name).expect("a built-in scenario");
+    let robot = RobotDescription::epuck();
+    let mut sim = Sim::new(
+        &scenario,
+        &robot,
+        SimConfig {
+            seed: cfg.seed,
+            ..SimConfig::default()
+        },
+    )
+    .expect("the scenario builds");
+    let sense = ContactSense::new(&robot);
+    let shape = scenario.object.shape.clone();
+    let order = shape.symmetry_order();
+    let object0 = scenario.object.start;
+    let radius = shape.radius() + robot.body_radius + cfg.start_margin_m;
+    let mut config = LearningConfig::for_symmetry(order);
+    config.learner.alphas_deg = cfg.alphas_deg.clone();
+    config.contact_method = cfg.contact_method;
+    config.approach_refines_shape = cfg.approach_refines_shape;
+    let mut session = LearningSession::new(name, &robot, config).expect("a valid config");
+
+    // (a) The shape: approach from the left, then one circling, object at its known pose.
+    let wall = Instant::now();
+    let t_start = sim.sim_time();
+    sim.reset(object0, start_pose(object0, radius, PI, 0.0));
+    session.begin_shape_circling(object0);
+    // Stop 2 mm before the circling's gap: the robot coasts about that far past the reading
+    // that ends the approach (one IR sample at 80 mm/s).
+    let reached = approach_to_gap(&mut sim, &sense, cfg.circle.gap + 0.002, 0.08, 5.0, |v| {
+        session.observe(v)
+    });
+    assert!(reached, "{name}: the shape circling's approach saw nothing");
+    run_circle(&mut sim, &robot, cfg.circle, |v| session.observe(v));
+    let shape_circling_moved_object_mm =
+        (sim.object_pose().position() - object0.position()).length() * 1e3;
+    let shape_points = session
+        .finish_shape_circling()
+        .expect("the shape circling gives a shape");
+
+    // (b) The trials.
+    let mut trials = Vec::new();
+    let (mut no_contact, mut circle_timeouts) = (0, 0);
+    for &alpha in &cfg.alphas_deg {
+        for k in 0..cfg.trials_per_alpha {
+            let phi = TAU * k as f64 / cfg.trials_per_alpha as f64;
+            sim.reset(
+                object0,
+                start_pose(object0, radius, phi, alpha.to_radians()),
+            );
+            session
+                .begin_trial(alpha, object0)
+                .expect("the shape is learned and alpha is known");
+            let mut contact_err = None;
+            let run = {
+                let s = std::cell::RefCell::new(&mut session);
+                run_push(
+                    &mut sim,
+                    &sense,
+                    cfg.push,
+                    |v| s.borrow_mut().observe(v),
+                    |v| contact_err = s.borrow_mut().infer_contact(v).err(),
+                )
+            };
+            assert_eq!(contact_err, None, "contact inferred out of order");
+            let Some(end) = run.end_view else {
+                session.abandon_trial();
+                no_contact += 1;
+                continue;
+            };
+            session.end_push(&end).expect("the push was under way");
+            hold(&mut sim, cfg.backoff_s, -cfg.backoff_speed, |v| {
+                session.observe(v)
+            });
+            if !run_circle(&mut sim, &robot, cfg.circle, |v| session.observe(v)) {
+                circle_timeouts += 1;
+            }
+            let after = sim.object_pose();
+            let truth = PushTruth {
+                touch_obj: run.touch_obj,
+                aim_obj: run.aim_obj,
+                displacement_obj: to_object_frame(object0, after.position()),
+                rotation_rad: wrap_angle(after.theta - object0.theta),
+                after,
+            };
+            let record = match session.finish_trial() {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    if std::env::var_os("AGP_TRACE").is_some() {
+                        eprintln!(
+                            "{name}: trial alpha {alpha} from {:.0} deg rejected: {e}",
+                            phi.to_degrees()
+                        );
+                    }
+                    None
+                }
+            };
+            trials.push(TrialOutcome {
+                alpha_deg: alpha,
+                trial_angle_deg: phi.to_degrees(),
+                record,
+                truth,
+            });
+        }
+    }
+    let learning_sim_time_s = sim.sim_time() - t_start;
+    let learning_wall_s = wall.elapsed().as_secs_f64();
+
+    // The learned S against the true border: the matcher's (first circling) and the final
+    // combined S (with the approaches' points), which is what the AG file carries.
+    let initial_shape = shape_quality(
+        &shape,
+        session.matcher().map_or(&[][..], |m| m.border_points()),
+    );
+    let final_shape = match agp_affordance::ShapeMatcher::new(
+        &session.gradient().combined_shape(),
+        session.config().matcher.clone(),
+    ) {
+        Ok(m) => shape_quality(&shape, m.border_points()),
+        Err(_) => ShapeQuality::default(),
+    };
+
+    // (i) Largest rotation per alpha, learned and true.
+    let gradient = session.gradient().clone();
+    let max_rotation_deg = cfg
+        .alphas_deg
+        .iter()
+        .map(|&a| {
+            let learned = gradient.max_rotation_deg(a).unwrap_or(f64::NAN);
+            let truth = trials
+                .iter()
+                .filter(|t| t.alpha_deg == a)
+                .map(|t| t.truth.rotation_rad.abs().to_degrees())
+                .fold(0.0, f64::max);
+            (a, learned, truth)
+        })
+        .collect();
+
+    // (iii) Pose from one circling, and the learned rotations.
+    let period = if order <= 1 {
+        TAU
+    } else {
+        TAU / f64::from(order)
+    };
+    let (mut pos_err, mut ori_err, mut rot_err) = (Vec::new(), Vec::new(), Vec::new());
+    let mut wrong_branch = 0;
+    for t in &trials {
+        let Some(r) = &t.record else { continue };
+        pos_err.push((r.object_after.position() - t.truth.after.position()).length() * 1e3);
+        if order != 0 {
+            ori_err.push(
+                angle_distance(r.matched.orientation_rad, t.truth.after.theta, period).to_degrees(),
+            );
+            let e = wrap_angle(r.outcome.rotation_rad - t.truth.rotation_rad).abs();
+            if order > 1 && e > period / 4.0 {
+                wrong_branch += 1;
+            }
+            rot_err.push(e.to_degrees());
+        }
+    }
+
+    // Contact estimates against the truth.
+    let contact_error_mm = ContactMethod::ALL
+        .iter()
+        .map(|&m| {
+            let mut e: Vec<f64> = trials
+                .iter()
+                .filter_map(|t| {
+                    let est = t.record.as_ref()?.contact.get(m)?;
+                    let truth = match m {
+                        ContactMethod::HeadingLine => t.truth.aim_obj?,
+                        _ => t.truth.touch_obj?,
+                    };
+                    Some((est - truth).length() * 1e3)
+                })
+                .collect();
+            (m, Spread::of(&mut e))
+        })
+        .collect();
+
+    // Gradients keyed by every method from the same trials, and one learned from the
+    // truth (true aim points and effects): what the representation can do with them.
+    let learner_config = || {
+        let mut lc = LearningConfig::for_symmetry(order).learner;
+        lc.alphas_deg = cfg.alphas_deg.clone();
+        AffordanceLearner::new(name, &lc).expect("valid")
+    };
+    let by_method: Vec<(ContactMethod, AffordanceGradient)> = ContactMethod::ALL
+        .iter()
+        .map(|&m| {
+            let mut learner = learner_config();
+            for r in trials.iter().filter_map(|t| t.record.as_ref()) {
+                if let Some(c) = r.contact.get(m) {
+                    let outcome = PushOutcome {
+                        contact_point_obj: c,
+                        ..r.outcome
+                    };
+                    learner.add_push(r.alpha_deg, &outcome).expect("finite");
+                }
+            }
+            (m, learner.into_gradient())
+        })
+        .collect();
+    let truth_learned = {
+        let mut learner = learner_config();
+        for t in &trials {
+            if let Some(c) = t.truth.aim_obj {
+                let outcome = PushOutcome {
+                    contact_point_obj: c,
+                    displacement_obj: t.truth.displacement_obj,
+                    rotation_rad: t.truth.rotation_rad,
+                };
+                learner.add_push(t.alpha_deg, &outcome).expect("finite");
+            }
+        }
+        learner.into_gradient()
+    };
+
+    // (ii) Unseen pushes: random angle round the object, random alpha in [-15, 15].
+    let wall = Instant::now();
+    let t_eval = sim.sim_time();
+    let mut rng = Rng::stream(cfg.seed, 99);
+    let mut samples: Vec<EvalPush> = Vec::new();
+    while samples.len() < cfg.eval_pushes {
+        let phi = rng.range(0.0, TAU);
+        let alpha = rng.range(-15.0, 15.0);
+        sim.reset(
+            object0,
+            start_pose(object0, radius, phi, alpha.to_radians()),
+        );
+        let mut estimates = None;
+        let run = run_push(
+            &mut sim,
+            &sense,
+            cfg.push,
+            |_| {},
+            |v| estimates = session.contact_estimates(v, object0),
+        );
+        if run.end_view.is_none() {
+            continue;
+        }
+        // Let the object come to rest.
+        hold(&mut sim, 0.1, 0.0, |_| {});
+        let after = sim.object_pose();
+        let Some(contact) = estimates else { continue };
+        samples.push(EvalPush {
+            contact,
+            true_aim: run.aim_obj,
+            alpha_deg: alpha,
+            displacement_obj: to_object_frame(object0, after.position()),
+            rotation_rad: wrap_angle(after.theta - object0.theta),
+        });
+    }
+    let eval_sim_time_s = sim.sim_time() - t_eval;
+    let eval_wall_s = wall.elapsed().as_secs_f64();
+    let keyed = |m: ContactMethod| move |e: &EvalPush| e.contact.get(m);
+    let prediction = predict_all(&gradient, &samples, order, keyed(cfg.contact_method));
+    let prediction_by_method = by_method
+        .iter()
+        .map(|(m, g)| (*m, predict_all(g, &samples, order, keyed(*m))))
+        .collect();
+    let prediction_truth_learned = predict_all(&truth_learned, &samples, order, |e| e.true_aim);
+    // Rotation error by how far the push's alpha lies from the nearest learned alpha.
+    let mut bins: [Vec<f64>; 3] = Default::default();
+    if order != 0 {
+        for e in &samples {
+            let Some(p) = e
+                .contact
+                .get(cfg.contact_method)
+                .and_then(|c| gradient.predict(c, e.alpha_deg))
+            else {
+                continue;
+            };
+            let d = cfg
+                .alphas_deg
+                .iter()
+                .map(|a| (a - e.alpha_deg).abs())
+                .fold(f64::INFINITY, f64::min);
+            bins[((d / 2.5) as usize).min(2)].push(
+                wrap_angle(p.rotation_rad - e.rotation_rad)
+                    .abs()
+                    .to_degrees(),
+            );
+        }
+    }
+    let rotation_error_by_alpha_gap_deg = bins.map(|mut b| Spread::of(&mut b));
+
+    ObjectReport {
+        name: name.to_owned(),
+        symmetry_order: order,
+        alphas_deg: cfg.alphas_deg.clone(),
+        push_duration_s: cfg.push.push_duration,
+        shape_points,
+        shape_circling_moved_object_mm,
+        trials: cfg.alphas_deg.len() * cfg.trials_per_alpha,
+        learned: session.trials_learned(),
+        no_contact,
+        rejected: session.trials_rejected() - no_contact,
+        circle_timeouts,
+        max_rotation_deg,
+        pose_position_mm: Spread::of(&mut pos_err),
+        pose_orientation_deg: (order != 0).then(|| Spread::of(&mut ori_err)),
+        wrong_branch,
+        learned_rotation_error_deg: Spread::of(&mut rot_err),
+        contact_error_mm,
+        prediction,
+        prediction_by_method,
+        prediction_truth_learned,
+        rotation_error_by_alpha_gap_deg,
+        initial_shape,
+        final_shape,
+        learning_sim_time_s,
+        learning_wall_s,
+        eval_sim_time_s,
+        eval_wall_s,
+        gradient,
+    }
+}
+
+/// One unseen push of the evaluation.
+#[derive(Debug, Clone, Copy)]
+struct EvalPush {
+    /// The estimator's contact estimates (object frame).
+    contact: ContactEstimates,
+    /// The true aim point (object frame).
+    true_aim: Option<DVec2>,
+    alpha_deg: f64,
+    /// True effect, object frame.
+    displacement_obj: DVec2,
+    rotation_rad: f64,
+}
+
+/// How `g` predicts `samples`, queried at the contact point `key` gives.
+fn predict_all(
+    g: &AffordanceGradient,
+    samples: &[EvalPush],
+    order: u32,
+    key: impl Fn(&EvalPush) -> Option<DVec2>,
+) -> PredictionStats {
+    let mut stats = PredictionStats::default();
+    let (mut de, mut dr, mut re, mut td, mut tr) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for e in samples {
+        stats.pushes += 1;
+        let Some(p) = key(e).and_then(|c| g.predict(c, e.alpha_deg)) else {
+            stats.unpredicted += 1;
+            continue;
+        };
+        let err = (p.displacement - e.displacement_obj).length();
+        de.push(err * 1e3);
+        dr.push(err / e.displacement_obj.length().max(1e-6));
+        td.push(e.displacement_obj.length() * 1e3);
+        tr.push(e.rotation_rad.abs().to_degrees());
+        if order != 0 {
+            re.push(
+                wrap_angle(p.rotation_rad - e.rotation_rad)
+                    .abs()
+                    .to_degrees(),
+            );
+        }
+    }
+    stats.displacement_error_mm = Spread::of(&mut de);
+    stats.displacement_error_ratio = Spread::of(&mut dr);
+    stats.rotation_error_deg = Spread::of(&mut re);
+    stats.true_displacement_mm = Spread::of(&mut td);
+    stats.true_rotation_abs_deg = Spread::of(&mut tr);
+    stats
+}
+
+fn fmt_spread(s: &Spread, unit: &str) -> String {
+    format!(
+        "median {:7.2} {unit}  p90 {:7.2} {unit}  (n {})",
+        s.median, s.p90, s.n
+    )
+}
+
+/// The report of one object as text.
+pub fn format_report(r: &ObjectReport) -> String {
+    let mut out = String::new();
+    let mut line = |s: String| {
+        out.push_str(&s);
+        out.push('\n');
+    };
+    line(format!(
+        "== {} (symmetry order {}) ==",
+        r.name, r.symmetry_order
+    ));
+    line(format!(
+        "alphas {:?} deg, push {:.2} s; shape circling: {} border points (object moved {:.2} mm)",
+        r.alphas_deg, r.push_duration_s, r.shape_points, r.shape_circling_moved_object_mm
+    ));
+    for (what, q) in [
+        ("S of the first circling", &r.initial_shape),
+        ("final S (with approaches)", &r.final_shape),
+    ] {
+        line(format!(
+            "{what}: {} ridge points, {} from the true border, {:.0} % of the border covered",
+            q.points,
+            fmt_spread(&q.error_mm, "mm"),
+            q.coverage * 100.0
+        ));
+    }
+    line(format!(
+        "trials {}: learned {}, no contact {}, rejected {}, circlings not closed {}",
+        r.trials, r.learned, r.no_contact, r.rejected, r.circle_timeouts
+    ));
+    line("(i) largest single-push rotation per alpha, deg:".into());
+    for &(a, learned, truth) in &r.max_rotation_deg {
+        let paper = PAPER_TRIANGLE_MAX_ROTATION_DEG
+            .iter()
+            .find(|p| p.0 == a)
+            .map(|p| format!("{:6.2}", p.1))
+            .unwrap_or_else(|| "   -  ".into());
+        line(format!(
+            "    A{:<4} learned (IR) {:6.2}   true {:6.2}   paper triangle {}",
+            a, learned, truth, paper
+        ));
+    }
+    let p = &r.prediction;
+    line(format!(
+        "(ii) {} unseen pushes (random angle, alpha in [-15, 15]), {} without a prediction:",
+        p.pushes, p.unpredicted
+    ));
+    line(format!(
+        "    displacement error  {}",
+        fmt_spread(&p.displacement_error_mm, "mm")
+    ));
+    line(format!(
+        "    as a fraction       {}",
+        fmt_spread(&p.displacement_error_ratio, "")
+    ));
+    if r.symmetry_order == 0 {
+        line("    rotation error      n/a (a disc's orientation is not observable by IR)".into());
+    } else {
+        line(format!(
+            "    rotation error      {}",
+            fmt_spread(&p.rotation_error_deg, "deg")
+        ));
+    }
+    line(format!(
+        "    true displacement   {}   true |rotation| {}",
+        fmt_spread(&p.true_displacement_mm, "mm"),
+        fmt_spread(&p.true_rotation_abs_deg, "deg")
+    ));
+    line("    by contact method (gradient keyed by it, same trials):".into());
+    for (m, s) in &r.prediction_by_method {
+        line(format!(
+            "      {:<14} disp {:6.2} mm ({:5.3})  rot {:6.2} deg  unpredicted {}",
+            m.name(),
+            s.displacement_error_mm.median,
+            s.displacement_error_ratio.median,
+            s.rotation_error_deg.median,
+            s.unpredicted
+        ));
+    }
+    let t = &r.prediction_truth_learned;
+    line(format!(
+        "      {:<14} disp {:6.2} mm ({:5.3})  rot {:6.2} deg  (gradient learned from the truth, at true aim points)",
+        "truth-learned",
+        t.displacement_error_mm.median,
+        t.displacement_error_ratio.median,
+        t.rotation_error_deg.median
+    ));
+    if r.symmetry_order != 0 {
+        let b = &r.rotation_error_by_alpha_gap_deg;
+        line(format!(
+            "    rotation error by alpha's distance to the nearest learned alpha: 0-2.5 deg {:.2} (n {}), 2.5-5 deg {:.2} (n {}), >5 deg {:.2} (n {})",
+            b[0].median, b[0].n, b[1].median, b[1].n, b[2].median, b[2].n
+        ));
+    }
+    line("    contact point error vs truth (touch point; aim point for heading-line):".into());
+    for (m, s) in &r.contact_error_mm {
+        line(format!("      {:<14} {}", m.name(), fmt_spread(s, "mm")));
+    }
+    line("(iii) pose from one circling (after each trial):".into());
+    line(format!(
+        "    position    {}",
+        fmt_spread(&r.pose_position_mm, "mm")
+    ));
+    match &r.pose_orientation_deg {
+        Some(s) => line(format!(
+            "    orientation {} (modulo {} deg)",
+            fmt_spread(s, "deg"),
+            if r.symmetry_order <= 1 {
+                360.0
+            } else {
+                360.0 / f64::from(r.symmetry_order)
+            }
+        )),
+        None => line("    orientation n/a (a disc)".into()),
+    }
+    if r.symmetry_order != 0 {
+        line(format!(
+            "    learned rotation error {}; symmetric branch wrong in {} trials",
+            fmt_spread(&r.learned_rotation_error_deg, "deg"),
+            r.wrong_branch
+        ));
+    }
+    line(format!(
+        "(iv) learning phase: {:.1} s simulated, {:.2} s wall; evaluation {:.1} s simulated, {:.2} s wall",
+        r.learning_sim_time_s, r.learning_wall_s, r.eval_sim_time_s, r.eval_wall_s
+    ));
+    out
+}
