@@ -11,7 +11,10 @@ use agp_shared_types::{GroundTruth, Instance, IrFrame, LockstepDriver, Pose2};
 /// binary of the workspace there first.
 fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    let dir = exe.parent().and_then(|d| d.parent()).expect("target folder");
+    let dir = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .expect("target folder");
     let path = dir.join(name);
     assert!(
         path.exists(),
@@ -55,7 +58,10 @@ impl Physics {
             if let Some(s) = self.child.try_wait().expect("wait") {
                 break s;
             }
-            assert!(Instant::now() < deadline, "physics ignored SIGTERM for 20 s");
+            assert!(
+                Instant::now() < deadline,
+                "physics ignored SIGTERM for 20 s"
+            );
             std::thread::sleep(Duration::from_millis(10));
         };
         assert!(status.success(), "physics exited with {status}");
@@ -69,7 +75,9 @@ impl Physics {
             .filter(|p| p.starts_with("/dev/shm") && !p.to_string_lossy().ends_with(".global_mgmt"))
             .collect();
         let name = self.instance.name().to_owned();
-        self.instance.remove_files().expect("remove the instance's files");
+        self.instance
+            .remove_files()
+            .expect("remove the instance's files");
         assert!(shm.is_empty(), "instance `{name}` left {shm:?} in /dev/shm");
         let left = self.instance.files();
         assert!(left.is_empty(), "instance `{name}` still has {left:?}");
@@ -117,17 +125,27 @@ fn a_robot_driven_into_the_object_sees_its_front_ir_rise_and_then_moves_it() {
         }
         let seen = first_seen.expect("the front IR never saw the object");
         let moved = first_moved.expect("the object never moved");
-        assert!(seen < moved, "IR saw it at step {seen}, it moved at step {moved}");
+        assert!(
+            seen < moved,
+            "IR saw it at step {seen}, it moved at step {moved}"
+        );
         // Approaching from 83 mm at 0.1 m/s: the readings climb. Compare means of the
         // first and last quarter of the approach (noise is at most a few % of a reading).
         let approach = &readings[seen..moved];
         let q = (approach.len() / 4).max(1);
         let early: f32 = approach[..q].iter().sum::<f32>() / q as f32;
         let late: f32 = approach[approach.len() - q..].iter().sum::<f32>() / q as f32;
-        assert!(late > 2.0 * early, "front IR did not rise: {early} -> {late}");
+        assert!(
+            late > 2.0 * early,
+            "front IR did not rise: {early} -> {late}"
+        );
         // Pushed straight through its centre for the rest of the 3 s: it went forward.
         let end: GroundTruth = *d.truth();
-        assert!(end.object.x - start.x > 0.05, "object moved only {} m", end.object.x - start.x);
+        assert!(
+            end.object.x - start.x > 0.05,
+            "object moved only {} m",
+            end.object.x - start.x
+        );
         assert!(end.contact == 1, "the robot is still pushing at the end");
     }
     physics.stop();
@@ -159,17 +177,38 @@ fn the_same_seed_gives_bit_identical_trajectories_in_lockstep() {
     assert_eq!(a.len(), b.len());
     for (k, ((fa, ta), (fb, tb))) in a.iter().zip(&b).enumerate() {
         let bits = |p: &Pose2| [p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()];
-        assert_eq!(bits(&ta.object), bits(&tb.object), "object differs at step {k}");
-        assert_eq!(bits(&ta.robot), bits(&tb.robot), "robot differs at step {k}");
-        assert_eq!(fa.ir_raw.map(f32::to_bits), fb.ir_raw.map(f32::to_bits), "IR differs at step {k}");
-        assert_eq!(bits(&fa.odometry), bits(&fb.odometry), "odometry differs at step {k}");
+        assert_eq!(
+            bits(&ta.object),
+            bits(&tb.object),
+            "object differs at step {k}"
+        );
+        assert_eq!(
+            bits(&ta.robot),
+            bits(&tb.robot),
+            "robot differs at step {k}"
+        );
+        assert_eq!(
+            fa.ir_raw.map(f32::to_bits),
+            fb.ir_raw.map(f32::to_bits),
+            "IR differs at step {k}"
+        );
+        assert_eq!(
+            bits(&fa.odometry),
+            bits(&fb.odometry),
+            "odometry differs at step {k}"
+        );
     }
     let moved = a.last().unwrap().1.object;
-    assert!(moved.x.hypot(moved.y) > 0.01, "the run must push the object to mean anything");
+    assert!(
+        moved.x.hypot(moved.y) > 0.01,
+        "the run must push the object to mean anything"
+    );
 
     let c = recorded_run("tpseed-c", 12);
     assert!(
-        a.iter().zip(&c).any(|((fa, _), (fc, _))| fa.ir_raw != fc.ir_raw),
+        a.iter()
+            .zip(&c)
+            .any(|((fa, _), (fc, _))| fa.ir_raw != fc.ir_raw),
         "another seed must give other IR noise"
     );
 }

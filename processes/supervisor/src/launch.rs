@@ -1,0 +1,1138 @@
+//! `launch.toml`: what `agp up` runs and how, parsed and validated whole before anything
+//! starts.
+//!
+//! ```toml
+//! instance = "default"          # iceoryx2 prefix `agp_default_`, root `/tmp/agp/default/`
+//! scenario = "triangle"         # a built-in name, or a scenario file (relative: to this file)
+//! results = "results"           # folder (relative: to this file); default "results"
+//!
+//! [clock]
+//! mode = "lockstep"             # "lockstep" (default) or "realtime"
+//! rate_hz = 640                 # physics steps per second; default 640
+//!
+//! [[process]]
+//! name = "physics"              # unique; letters, digits, `-`, `_`
+//! exec = "agp-physics"          # a binary next to `agp`, or a path (relative: to this file)
+//! args = ["--seed", "7"]        # default []
+//! env = { RUST_LOG = "info" }   # default {}; the `AGP_*` context variables are reserved
+//! restart = { policy = "on-failure", max_restarts = 3, backoff_ms = 200 }
+//! ends_run = false              # exiting with status 0 ends the run; default false
+//! stop_grace_ms = 3000          # SIGTERM -> SIGKILL delay when stopping; default 3000
+//! ```
+//!
+//! Every fault is reported with the file, the 1-based line and what is wrong:
+//! ``launch.toml:12: unknown policy `sometimes`; expected `never`, `on-failure` or `always` ``.
+
+use std::collections::BTreeMap;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use agp_shared_types::{Instance, InstanceNameError, ROOT_ENV};
+use serde::Deserialize;
+use toml::Spanned;
+
+/// Names `scenario` may take without being a file.
+pub use agp_world::BUILTIN_NAMES as BUILTIN_SCENARIOS;
+
+/// Default physics rate, in steps per second.
+pub const DEFAULT_RATE_HZ: f64 = 640.0;
+
+/// Default delay between SIGTERM and SIGKILL when a process is stopped.
+pub const DEFAULT_STOP_GRACE: Duration = Duration::from_secs(3);
+
+/// The environment variables `agp up` gives every child; a launch file may not set them.
+pub const CONTEXT_ENV: [&str; 6] = [
+    "AGP_INSTANCE",
+    "AGP_SCENARIO",
+    "AGP_CLOCK",
+    "AGP_RATE_HZ",
+    "AGP_RESULTS",
+    "AGP_PROCESS",
+];
+
+/// A validated launch file: every path absolute, every executable found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaunchConfig {
+    /// The launch file, as it was named.
+    pub file: PathBuf,
+    /// The instance name (from the file or the override), valid for [`Instance::new`].
+    pub instance: String,
+    pub scenario: ScenarioSource,
+    /// Absolute folder where results go (not created by parsing).
+    pub results: PathBuf,
+    pub clock: ClockConfig,
+    /// The processes, in the order they start.
+    pub processes: Vec<ProcessConfig>,
+}
+
+/// Where the scenario comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ScenarioSource {
+    /// One of [`BUILTIN_SCENARIOS`].
+    Builtin(String),
+    /// An existing file, absolute.
+    File(PathBuf),
+}
+
+impl ScenarioSource {
+    /// The value of `AGP_SCENARIO`: the built-in name or the absolute path.
+    pub fn env_value(&self) -> OsString {
+        match self {
+            Self::Builtin(name) => OsString::from(name),
+            Self::File(path) => path.clone().into_os_string(),
+        }
+    }
+}
+
+impl std::fmt::Display for ScenarioSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Builtin(name) => write!(f, "{name}"),
+            Self::File(path) => write!(f, "{}", path.display()),
+        }
+    }
+}
+
+/// How simulated time advances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockConfig {
+    pub mode: ClockMode,
+    /// Physics steps per second, finite and positive.
+    pub rate_hz: f64,
+}
+
+/// The clock modes of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClockMode {
+    /// Physics steps only when the command for the step has arrived: reproducible.
+    Lockstep,
+    /// Physics steps at `rate_hz` on the wall clock.
+    Realtime,
+}
+
+impl ClockMode {
+    /// The name used in the file and in `AGP_CLOCK`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Lockstep => "lockstep",
+            Self::Realtime => "realtime",
+        }
+    }
+}
+
+/// One `[[process]]` entry.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProcessConfig {
+    /// Unique within the file; also the child's `AGP_PROCESS`.
+    pub name: String,
+    /// Absolute path of an existing executable file.
+    pub exec: PathBuf,
+    pub args: Vec<String>,
+    /// Variables set on top of the supervisor's environment (never an `AGP_*` context one).
+    pub env: BTreeMap<String, String>,
+    pub restart: RestartConfig,
+    /// Whether this process exiting with status 0 ends the run.
+    pub ends_run: bool,
+    /// Delay between SIGTERM and SIGKILL when the supervisor stops this process.
+    pub stop_grace: Duration,
+}
+
+/// What happens when a process exits on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RestartConfig {
+    pub policy: RestartPolicy,
+    /// Restarts allowed over the whole run; one more exit that would restart fails the run.
+    pub max_restarts: u32,
+    /// Delay before the first restart; doubled for each further one (see
+    /// [`RestartConfig::delay_before`]).
+    pub backoff: Duration,
+}
+
+/// Longest delay between an exit and its restart, whatever the backoff doubling reaches.
+pub const MAX_RESTART_DELAY: Duration = Duration::from_secs(10);
+
+impl Default for RestartConfig {
+    fn default() -> Self {
+        Self {
+            policy: RestartPolicy::Never,
+            max_restarts: 3,
+            backoff: Duration::from_millis(200),
+        }
+    }
+}
+
+/// When a process is restarted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RestartPolicy {
+    /// Never: an exit with status 0 is fine, any other exit fails the run.
+    Never,
+    /// After an exit with a non-zero status or by a signal; an exit with status 0 is fine.
+    OnFailure,
+    /// After any exit.
+    Always,
+}
+
+impl RestartPolicy {
+    /// The name used in the file.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Never => "never",
+            Self::OnFailure => "on-failure",
+            Self::Always => "always",
+        }
+    }
+}
+
+/// What the supervisor does after a process exited on its own (not stopped by the supervisor).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitDecision {
+    /// The process is done; the run goes on without it.
+    Done,
+    /// Start it again after `delay`; this is restart number `nth` (1-based).
+    Restart { nth: u32, delay: Duration },
+    /// The process failed past its policy: stop the run.
+    FailRun,
+}
+
+impl RestartConfig {
+    /// Delay before restart number `nth` (1-based): `backoff × 2^(nth-1)`, at most
+    /// [`MAX_RESTART_DELAY`].
+    pub fn delay_before(&self, nth: u32) -> Duration {
+        let factor = 1u32.checked_shl(nth.saturating_sub(1)).unwrap_or(u32::MAX);
+        self.backoff
+            .checked_mul(factor)
+            .unwrap_or(MAX_RESTART_DELAY)
+            .min(MAX_RESTART_DELAY)
+    }
+
+    /// Applies the policy to an exit: `success` is whether it exited with status 0,
+    /// `restarts_so_far` how many times the process was already restarted in this run.
+    pub fn decide(&self, success: bool, restarts_so_far: u32) -> ExitDecision {
+        let wants_restart = match self.policy {
+            RestartPolicy::Never => false,
+            RestartPolicy::OnFailure => !success,
+            RestartPolicy::Always => true,
+        };
+        if !wants_restart {
+            return if success {
+                ExitDecision::Done
+            } else {
+                ExitDecision::FailRun
+            };
+        }
+        if restarts_so_far >= self.max_restarts {
+            return ExitDecision::FailRun;
+        }
+        let nth = restarts_so_far + 1;
+        ExitDecision::Restart {
+            nth,
+            delay: self.delay_before(nth),
+        }
+    }
+}
+
+/// What parsing needs besides the file.
+#[derive(Debug, Clone, Default)]
+pub struct LaunchOptions {
+    /// Replaces the file's `instance` (`agp up --instance`).
+    pub instance: Option<String>,
+    /// Folder where bare executable names (`exec = "agp-physics"`) are looked up: the
+    /// folder of the running `agp`.
+    pub exe_dir: PathBuf,
+}
+
+/// Why a launch file was refused: every fault found, so the user fixes them in one go.
+#[derive(Debug, thiserror::Error)]
+#[error("{}", self.render())]
+pub struct LaunchConfigParseError {
+    /// The launch file, as it was named.
+    pub file: PathBuf,
+    /// At least one fault, in the order of the file.
+    pub faults: Vec<LaunchFault>,
+}
+
+impl LaunchConfigParseError {
+    fn render(&self) -> String {
+        let mut out = String::new();
+        for (i, fault) in self.faults.iter().enumerate() {
+            if i > 0 {
+                out.push('\n');
+            }
+            out.push_str(&self.file.display().to_string());
+            if let Some(line) = fault.line {
+                out.push_str(&format!(":{line}"));
+            }
+            out.push_str(&format!(": {}", fault.kind));
+        }
+        out
+    }
+}
+
+/// One thing wrong in a launch file, and where.
+#[derive(Debug)]
+pub struct LaunchFault {
+    /// 1-based line, when the fault has a place in the file.
+    pub line: Option<usize>,
+    pub kind: LaunchFaultKind,
+}
+
+/// The kinds of fault a launch file can hold.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchFaultKind {
+    /// The file could not be read.
+    #[error("cannot read the launch file: {0}")]
+    Read(#[source] std::io::Error),
+    /// Not TOML, an unknown key, a missing key or a value of the wrong type (toml's words).
+    #[error("{0}")]
+    Toml(String),
+    /// Neither the file nor `--instance` names the instance.
+    #[error("no instance name: set `instance = \"NAME\"` or pass `--instance NAME`")]
+    NoInstance,
+    /// The instance name cannot build an iceoryx2 config.
+    #[error("bad instance name `{name}`{from}: {reason}", from = if *.from_cli { " (from --instance)" } else { "" })]
+    BadInstanceName {
+        name: String,
+        from_cli: bool,
+        reason: InstanceNameError,
+    },
+    /// `scenario` is neither a built-in name nor an existing file.
+    #[error(
+        "scenario `{name}` is neither a built-in ({builtins}) nor an existing file (looked for {})",
+        looked_at.display(),
+        builtins = BUILTIN_SCENARIOS.join(", ")
+    )]
+    UnknownScenario { name: String, looked_at: PathBuf },
+    /// The scenario file exists but is not a valid scenario (the message names its line).
+    #[error("scenario `{name}` is refused: {reason}")]
+    BadScenario { name: String, reason: String },
+    /// `clock.mode` is not a clock mode.
+    #[error("unknown clock mode `{0}`; expected `lockstep` or `realtime`")]
+    UnknownClockMode(String),
+    /// `clock.rate_hz` is zero, negative or not finite.
+    #[error("`rate_hz` must be a positive number of steps per second, got {0}")]
+    BadRate(f64),
+    /// No `[[process]]` entry.
+    #[error("no `[[process]]` entry: a launch file starts at least one process")]
+    NoProcess,
+    /// A process name is empty or holds a character other than letters, digits, `-`, `_`.
+    #[error("bad process name `{0}`; use letters, digits, `-` and `_`")]
+    BadProcessName(String),
+    /// Two processes share a name.
+    #[error("duplicate process name `{name}` (first at line {first_line})")]
+    DuplicateProcess { name: String, first_line: usize },
+    /// `exec` names nothing runnable.
+    #[error("process `{process}`: no executable `{exec}` (looked for {})", looked_at.display())]
+    MissingExecutable {
+        process: String,
+        exec: String,
+        looked_at: PathBuf,
+    },
+    /// `restart.policy` is not a policy.
+    #[error("unknown policy `{0}`; expected `never`, `on-failure` or `always`")]
+    UnknownPolicy(String),
+    /// An `env` key is reserved or cannot be a variable name.
+    #[error("process `{process}`: cannot set `{key}` in `env`: {why}")]
+    BadEnv {
+        process: String,
+        key: String,
+        why: &'static str,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLaunch {
+    instance: Option<Spanned<String>>,
+    scenario: Spanned<String>,
+    results: Option<String>,
+    clock: Option<RawClock>,
+    #[serde(default)]
+    process: Vec<Spanned<RawProcess>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawClock {
+    mode: Option<Spanned<String>>,
+    rate_hz: Option<Spanned<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProcess {
+    name: Spanned<String>,
+    exec: Spanned<String>,
+    #[serde(default)]
+    args: Vec<String>,
+    #[serde(default)]
+    env: BTreeMap<Spanned<String>, String>,
+    restart: Option<RawRestart>,
+    #[serde(default)]
+    ends_run: bool,
+    stop_grace_ms: Option<u64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRestart {
+    policy: Option<Spanned<String>>,
+    max_restarts: Option<u32>,
+    backoff_ms: Option<u64>,
+}
+
+/// Collects faults while the whole file is checked.
+struct Checker<'a> {
+    text: &'a str,
+    faults: Vec<LaunchFault>,
+}
+
+impl Checker<'_> {
+    fn line_of(&self, span: &std::ops::Range<usize>) -> usize {
+        line_at(self.text, span.start)
+    }
+
+    fn fault_at<T>(&mut self, at: &Spanned<T>, kind: LaunchFaultKind) {
+        let line = Some(self.line_of(&at.span()));
+        self.faults.push(LaunchFault { line, kind });
+    }
+
+    fn fault(&mut self, kind: LaunchFaultKind) {
+        self.faults.push(LaunchFault { line: None, kind });
+    }
+}
+
+/// 1-based line of byte `offset` in `text`.
+fn line_at(text: &str, offset: usize) -> usize {
+    let end = offset.min(text.len());
+    text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+impl LaunchConfig {
+    /// Reads and validates the launch file at `path`.
+    pub fn load(path: &Path, options: &LaunchOptions) -> Result<Self, LaunchConfigParseError> {
+        match std::fs::read_to_string(path) {
+            Ok(text) => Self::parse(&text, path, options),
+            Err(e) => Err(LaunchConfigParseError {
+                file: path.to_owned(),
+                faults: vec![LaunchFault {
+                    line: None,
+                    kind: LaunchFaultKind::Read(e),
+                }],
+            }),
+        }
+    }
+
+    /// Validates the text of the launch file `file`: `file` names it in faults, and its
+    /// folder anchors relative paths. Touches nothing but the file system's metadata.
+    pub fn parse(
+        text: &str,
+        file: &Path,
+        options: &LaunchOptions,
+    ) -> Result<Self, LaunchConfigParseError> {
+        let refuse = |faults| LaunchConfigParseError {
+            file: file.to_owned(),
+            faults,
+        };
+        let raw: RawLaunch = toml::from_str(text).map_err(|e| {
+            refuse(vec![LaunchFault {
+                line: e.span().map(|s| line_at(text, s.start)),
+                kind: LaunchFaultKind::Toml(e.message().trim_end().to_owned()),
+            }])
+        })?;
+        let base = std::path::absolute(file)
+            .ok()
+            .and_then(|f| f.parent().map(Path::to_path_buf))
+            .unwrap_or_default();
+        let mut check = Checker {
+            text,
+            faults: Vec::new(),
+        };
+
+        let instance = match (&options.instance, &raw.instance) {
+            (Some(name), _) => {
+                if let Err(reason) = Instance::validate_name(name) {
+                    check.fault(LaunchFaultKind::BadInstanceName {
+                        name: name.clone(),
+                        from_cli: true,
+                        reason,
+                    });
+                }
+                name.clone()
+            }
+            (None, Some(name)) => {
+                if let Err(reason) = Instance::validate_name(name.as_ref()) {
+                    check.fault_at(
+                        name,
+                        LaunchFaultKind::BadInstanceName {
+                            name: name.as_ref().clone(),
+                            from_cli: false,
+                            reason,
+                        },
+                    );
+                }
+                name.as_ref().clone()
+            }
+            (None, None) => {
+                check.fault(LaunchFaultKind::NoInstance);
+                String::new()
+            }
+        };
+
+        let scenario = resolve_scenario(&mut check, &raw.scenario, &base);
+        let results = base.join(raw.results.as_deref().unwrap_or("results"));
+        let clock = resolve_clock(&mut check, raw.clock.as_ref());
+
+        if raw.process.is_empty() {
+            check.fault(LaunchFaultKind::NoProcess);
+        }
+        let mut processes = Vec::with_capacity(raw.process.len());
+        let mut first_lines: BTreeMap<String, usize> = BTreeMap::new();
+        for entry in &raw.process {
+            let p = entry.as_ref();
+            let name = p.name.as_ref();
+            if name.is_empty()
+                || !name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+            {
+                check.fault_at(&p.name, LaunchFaultKind::BadProcessName(name.clone()));
+            }
+            let line = check.line_of(&p.name.span());
+            if let Some(&first_line) = first_lines.get(name) {
+                check.fault_at(
+                    &p.name,
+                    LaunchFaultKind::DuplicateProcess {
+                        name: name.clone(),
+                        first_line,
+                    },
+                );
+            } else {
+                first_lines.insert(name.clone(), line);
+            }
+            processes.push(resolve_process(&mut check, p, &base, &options.exe_dir));
+        }
+
+        if !check.faults.is_empty() {
+            check.faults.sort_by_key(|f| f.line.unwrap_or(0));
+            return Err(refuse(check.faults));
+        }
+        Ok(Self {
+            file: file.to_owned(),
+            instance,
+            scenario,
+            results,
+            clock,
+            processes,
+        })
+    }
+
+    /// The context every child gets as environment variables (on top of the supervisor's
+    /// own environment and the process's `env`): `AGP_INSTANCE`, `AGP_SCENARIO`,
+    /// `AGP_CLOCK`, `AGP_RATE_HZ`, `AGP_RESULTS`, `AGP_PROCESS`.
+    pub fn context_env(&self, process: &ProcessConfig) -> [(&'static str, OsString); 6] {
+        [
+            ("AGP_INSTANCE", OsString::from(&self.instance)),
+            ("AGP_SCENARIO", self.scenario.env_value()),
+            ("AGP_CLOCK", OsString::from(self.clock.mode.as_str())),
+            (
+                "AGP_RATE_HZ",
+                OsString::from(self.clock.rate_hz.to_string()),
+            ),
+            ("AGP_RESULTS", self.results.clone().into_os_string()),
+            ("AGP_PROCESS", OsString::from(&process.name)),
+        ]
+    }
+}
+
+fn resolve_scenario(check: &mut Checker<'_>, raw: &Spanned<String>, base: &Path) -> ScenarioSource {
+    let name = raw.as_ref();
+    if BUILTIN_SCENARIOS.contains(&name.as_str()) {
+        return ScenarioSource::Builtin(name.clone());
+    }
+    let path = base.join(name);
+    if name.is_empty() || !path.is_file() {
+        check.fault_at(
+            raw,
+            LaunchFaultKind::UnknownScenario {
+                name: name.clone(),
+                looked_at: path.clone(),
+            },
+        );
+    } else if let Err(e) = agp_world::Scenario::load(&path) {
+        // Validated whole here, so that a bad scenario starts nothing.
+        check.fault_at(
+            raw,
+            LaunchFaultKind::BadScenario {
+                name: name.clone(),
+                reason: e.to_string(),
+            },
+        );
+    }
+    ScenarioSource::File(path)
+}
+
+fn resolve_clock(check: &mut Checker<'_>, raw: Option<&RawClock>) -> ClockConfig {
+    let mut clock = ClockConfig {
+        mode: ClockMode::Lockstep,
+        rate_hz: DEFAULT_RATE_HZ,
+    };
+    let Some(raw) = raw else {
+        return clock;
+    };
+    if let Some(mode) = &raw.mode {
+        match mode.as_ref().as_str() {
+            "lockstep" => clock.mode = ClockMode::Lockstep,
+            "realtime" => clock.mode = ClockMode::Realtime,
+            other => check.fault_at(mode, LaunchFaultKind::UnknownClockMode(other.to_owned())),
+        }
+    }
+    if let Some(rate) = &raw.rate_hz {
+        let r = *rate.as_ref();
+        if r.is_finite() && r > 0.0 {
+            clock.rate_hz = r;
+        } else {
+            check.fault_at(rate, LaunchFaultKind::BadRate(r));
+        }
+    }
+    clock
+}
+
+fn resolve_process(
+    check: &mut Checker<'_>,
+    p: &RawProcess,
+    base: &Path,
+    exe_dir: &Path,
+) -> ProcessConfig {
+    let name = p.name.as_ref().clone();
+    let exec_str = p.exec.as_ref();
+    // A bare name is a binary of the workspace, next to `agp`; anything with a slash is a path.
+    let exec = if exec_str.contains('/') {
+        base.join(exec_str)
+    } else {
+        exe_dir.join(exec_str)
+    };
+    if exec_str.is_empty() || !is_executable_file(&exec) {
+        check.fault_at(
+            &p.exec,
+            LaunchFaultKind::MissingExecutable {
+                process: name.clone(),
+                exec: exec_str.clone(),
+                looked_at: exec.clone(),
+            },
+        );
+    }
+
+    let mut env = BTreeMap::new();
+    for (key, value) in &p.env {
+        let k = key.as_ref();
+        let why = if CONTEXT_ENV.contains(&k.as_str()) || k == ROOT_ENV {
+            Some("it is the context `agp up` gives every process")
+        } else if k.is_empty() || k.contains('=') || k.contains('\0') {
+            Some("not a variable name")
+        } else if value.contains('\0') {
+            Some("the value holds a NUL byte")
+        } else {
+            None
+        };
+        match why {
+            Some(why) => check.fault_at(
+                key,
+                LaunchFaultKind::BadEnv {
+                    process: name.clone(),
+                    key: k.clone(),
+                    why,
+                },
+            ),
+            None => {
+                env.insert(k.clone(), value.clone());
+            }
+        }
+    }
+
+    let mut restart = RestartConfig::default();
+    if let Some(raw) = &p.restart {
+        if let Some(policy) = &raw.policy {
+            match policy.as_ref().as_str() {
+                "never" => restart.policy = RestartPolicy::Never,
+                "on-failure" => restart.policy = RestartPolicy::OnFailure,
+                "always" => restart.policy = RestartPolicy::Always,
+                other => check.fault_at(policy, LaunchFaultKind::UnknownPolicy(other.to_owned())),
+            }
+        }
+        if let Some(max) = raw.max_restarts {
+            restart.max_restarts = max;
+        }
+        if let Some(ms) = raw.backoff_ms {
+            restart.backoff = Duration::from_millis(ms);
+        }
+    }
+
+    ProcessConfig {
+        name,
+        exec,
+        args: p.args.clone(),
+        env,
+        restart,
+        ends_run: p.ends_run,
+        stop_grace: p
+            .stop_grace_ms
+            .map_or(DEFAULT_STOP_GRACE, Duration::from_millis),
+    }
+}
+
+fn is_executable_file(path: &Path) -> bool {
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    /// A folder holding a launch file's neighbours: an executable `agp-fake` in `bin/`,
+    /// an executable `tools/my-planner` and a scenario file `arena.toml`.
+    struct Fixture {
+        dir: tempfile::TempDir,
+    }
+
+    impl Fixture {
+        fn new() -> Self {
+            let dir = tempfile::tempdir().expect("temp dir");
+            for exe in ["bin/agp-fake", "tools/my-planner"] {
+                let path = dir.path().join(exe);
+                std::fs::create_dir_all(path.parent().expect("parent")).expect("mkdir");
+                std::fs::write(&path, "#!/bin/sh\n").expect("write");
+                std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+                    .expect("chmod");
+            }
+            let pentagon = include_str!("../../../libs/world/scenarios/pentagon.toml");
+            std::fs::write(dir.path().join("arena.toml"), pentagon).expect("write");
+            std::fs::write(dir.path().join("not-exec"), "").expect("write");
+            Self { dir }
+        }
+
+        fn options(&self) -> LaunchOptions {
+            LaunchOptions {
+                instance: None,
+                exe_dir: self.dir.path().join("bin"),
+            }
+        }
+
+        fn file(&self) -> PathBuf {
+            self.dir.path().join("launch.toml")
+        }
+
+        fn parse(&self, text: &str) -> Result<LaunchConfig, LaunchConfigParseError> {
+            LaunchConfig::parse(text, &self.file(), &self.options())
+        }
+
+        /// Parses `text`, expecting exactly one fault; returns its line and message.
+        fn fault(&self, text: &str) -> (Option<usize>, String, LaunchFaultKind) {
+            let err = self
+                .parse(text)
+                .expect_err("the launch file must be refused");
+            assert_eq!(err.faults.len(), 1, "faults: {err}");
+            let shown = err.to_string();
+            let fault = err.faults.into_iter().next().expect("one fault");
+            (fault.line, shown, fault.kind)
+        }
+    }
+
+    const GOOD: &str = r#"
+instance = "t-launch"
+scenario = "triangle"
+
+[clock]
+mode = "realtime"
+rate_hz = 320
+
+[[process]]
+name = "physics"
+exec = "agp-fake"
+args = ["--seed", "7"]
+env = { RUST_LOG = "info" }
+restart = { policy = "on-failure", max_restarts = 5, backoff_ms = 50 }
+
+[[process]]
+name = "planner"
+exec = "tools/my-planner"
+ends_run = true
+stop_grace_ms = 500
+"#;
+
+    #[test]
+    fn a_good_file_resolves_every_path_and_default() {
+        let fx = Fixture::new();
+        let c = fx.parse(GOOD).expect("valid");
+        assert_eq!(c.instance, "t-launch");
+        assert_eq!(c.scenario, ScenarioSource::Builtin("triangle".into()));
+        assert_eq!(c.results, fx.dir.path().join("results"));
+        assert_eq!(c.clock.mode, ClockMode::Realtime);
+        assert_eq!(c.clock.rate_hz, 320.0);
+        assert_eq!(c.processes.len(), 2);
+        let physics = &c.processes[0];
+        assert_eq!(physics.exec, fx.dir.path().join("bin/agp-fake"));
+        assert_eq!(physics.args, ["--seed", "7"]);
+        assert_eq!(
+            physics.env.get("RUST_LOG").map(String::as_str),
+            Some("info")
+        );
+        assert_eq!(physics.restart.policy, RestartPolicy::OnFailure);
+        assert_eq!(physics.restart.max_restarts, 5);
+        assert_eq!(physics.restart.backoff, Duration::from_millis(50));
+        assert!(!physics.ends_run);
+        assert_eq!(physics.stop_grace, DEFAULT_STOP_GRACE);
+        let planner = &c.processes[1];
+        assert_eq!(planner.exec, fx.dir.path().join("tools/my-planner"));
+        assert_eq!(planner.restart, RestartConfig::default());
+        assert!(planner.ends_run);
+        assert_eq!(planner.stop_grace, Duration::from_millis(500));
+    }
+
+    #[test]
+    fn a_missing_clock_means_lockstep_at_640_hz() {
+        let fx = Fixture::new();
+        let c = fx
+            .parse("instance = \"a\"\nscenario = \"square\"\n[[process]]\nname = \"p\"\nexec = \"agp-fake\"\n")
+            .expect("valid");
+        assert_eq!(c.clock.mode, ClockMode::Lockstep);
+        assert_eq!(c.clock.rate_hz, DEFAULT_RATE_HZ);
+    }
+
+    #[test]
+    fn a_scenario_file_resolves_against_the_launch_folder() {
+        let fx = Fixture::new();
+        let c = fx
+            .parse(&GOOD.replace("\"triangle\"", "\"arena.toml\""))
+            .expect("valid");
+        assert_eq!(
+            c.scenario,
+            ScenarioSource::File(fx.dir.path().join("arena.toml"))
+        );
+        assert_eq!(
+            c.scenario.env_value(),
+            fx.dir.path().join("arena.toml").into_os_string()
+        );
+    }
+
+    #[test]
+    fn a_scenario_file_that_is_not_a_valid_scenario_is_refused_with_its_own_line() {
+        let fx = Fixture::new();
+        let bad = include_str!("../../../libs/world/scenarios/pentagon.toml").replacen(
+            "mass_kg",
+            "mass_kilos",
+            1,
+        );
+        std::fs::write(fx.dir.path().join("arena.toml"), &bad).expect("write");
+        let (line, shown, kind) = fx.fault(&GOOD.replace("\"triangle\"", "\"arena.toml\""));
+        assert!(
+            matches!(kind, LaunchFaultKind::BadScenario { .. }),
+            "{kind:?}"
+        );
+        assert_eq!(line, Some(3), "{shown}");
+        let bad_line = bad
+            .lines()
+            .position(|l| l.contains("mass_kilos"))
+            .expect("line")
+            + 1;
+        assert!(
+            shown.contains(&format!("arena.toml:{bad_line}:")),
+            "the scenario's own line is not named: {shown}"
+        );
+    }
+
+    #[test]
+    fn the_instance_override_replaces_the_files_name() {
+        let fx = Fixture::new();
+        let options = LaunchOptions {
+            instance: Some("other".into()),
+            ..fx.options()
+        };
+        let c = LaunchConfig::parse(GOOD, &fx.file(), &options).expect("valid");
+        assert_eq!(c.instance, "other");
+    }
+
+    #[test]
+    fn every_child_gets_the_context_variables() {
+        let fx = Fixture::new();
+        let c = fx.parse(GOOD).expect("valid");
+        let env = c.context_env(&c.processes[1]);
+        let get = |k: &str| {
+            env.iter()
+                .find(|(name, _)| *name == k)
+                .map(|(_, v)| v.to_string_lossy().into_owned())
+        };
+        assert_eq!(get("AGP_INSTANCE").as_deref(), Some("t-launch"));
+        assert_eq!(get("AGP_SCENARIO").as_deref(), Some("triangle"));
+        assert_eq!(get("AGP_CLOCK").as_deref(), Some("realtime"));
+        assert_eq!(get("AGP_RATE_HZ").as_deref(), Some("320"));
+        assert_eq!(
+            get("AGP_RESULTS"),
+            Some(fx.dir.path().join("results").to_string_lossy().into_owned())
+        );
+        assert_eq!(get("AGP_PROCESS").as_deref(), Some("planner"));
+    }
+
+    #[test]
+    fn an_unknown_key_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, shown, kind) =
+            fx.fault(&GOOD.replace("ends_run = true", "ends_run = true\nrestrat = 3"));
+        assert_eq!(line, Some(20));
+        assert!(matches!(kind, LaunchFaultKind::Toml(_)));
+        assert!(
+            shown.contains("launch.toml:20: unknown field `restrat`"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_key_inside_an_inline_table_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, shown, _) = fx.fault(&GOOD.replace("max_restarts = 5", "max_restart = 5"));
+        assert_eq!(line, Some(14));
+        assert!(shown.contains("unknown field `max_restart`"), "{shown}");
+    }
+
+    #[test]
+    fn a_toml_syntax_error_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("mode = \"realtime\"", "mode = realtime"));
+        assert_eq!(line, Some(6));
+        assert!(matches!(kind, LaunchFaultKind::Toml(_)));
+    }
+
+    #[test]
+    fn an_unknown_policy_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, shown, kind) = fx.fault(&GOOD.replace("\"on-failure\"", "\"sometimes\""));
+        assert_eq!(line, Some(14));
+        assert!(matches!(kind, LaunchFaultKind::UnknownPolicy(ref p) if p == "sometimes"));
+        assert!(
+            shown.ends_with(
+                "launch.toml:14: unknown policy `sometimes`; expected `never`, `on-failure` or `always`"
+            ),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn a_negative_rate_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("rate_hz = 320", "rate_hz = -320"));
+        assert_eq!(line, Some(7));
+        assert!(matches!(kind, LaunchFaultKind::BadRate(r) if r == -320.0));
+    }
+
+    #[test]
+    fn a_zero_rate_is_refused() {
+        let fx = Fixture::new();
+        let (_, _, kind) = fx.fault(&GOOD.replace("rate_hz = 320", "rate_hz = 0.0"));
+        assert!(matches!(kind, LaunchFaultKind::BadRate(_)));
+    }
+
+    #[test]
+    fn an_unknown_clock_mode_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("\"realtime\"", "\"fast\""));
+        assert_eq!(line, Some(6));
+        assert!(matches!(kind, LaunchFaultKind::UnknownClockMode(ref m) if m == "fast"));
+    }
+
+    #[test]
+    fn a_negative_max_restarts_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("max_restarts = 5", "max_restarts = -1"));
+        assert_eq!(line, Some(14));
+        assert!(matches!(kind, LaunchFaultKind::Toml(_)));
+    }
+
+    #[test]
+    fn a_bad_instance_name_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("\"t-launch\"", "\"Bad Name\""));
+        assert_eq!(line, Some(2));
+        assert!(matches!(
+            kind,
+            LaunchFaultKind::BadInstanceName {
+                from_cli: false,
+                ..
+            }
+        ));
+    }
+
+    #[test]
+    fn a_bad_instance_override_is_refused() {
+        let fx = Fixture::new();
+        let options = LaunchOptions {
+            instance: Some("x".repeat(40)),
+            ..fx.options()
+        };
+        let err = LaunchConfig::parse(GOOD, &fx.file(), &options).expect_err("refused");
+        assert!(matches!(
+            err.faults[0].kind,
+            LaunchFaultKind::BadInstanceName { from_cli: true, .. }
+        ));
+        assert!(err.to_string().contains("--instance"), "{err}");
+    }
+
+    #[test]
+    fn a_file_without_instance_needs_the_override() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("instance = \"t-launch\"", ""));
+        assert_eq!(line, None);
+        assert!(matches!(kind, LaunchFaultKind::NoInstance));
+    }
+
+    #[test]
+    fn a_duplicate_process_name_is_refused_with_both_lines() {
+        let fx = Fixture::new();
+        let (line, shown, kind) = fx.fault(&GOOD.replace("\"planner\"", "\"physics\""));
+        assert_eq!(line, Some(17));
+        assert!(
+            matches!(
+                kind,
+                LaunchFaultKind::DuplicateProcess { first_line: 10, .. }
+            ),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn a_bad_process_name_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("\"planner\"", "\"my planner\""));
+        assert_eq!(line, Some(17));
+        assert!(matches!(kind, LaunchFaultKind::BadProcessName(_)));
+    }
+
+    #[test]
+    fn a_file_without_process_is_refused() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault("instance = \"a\"\nscenario = \"circle\"\n");
+        assert_eq!(line, None);
+        assert!(matches!(kind, LaunchFaultKind::NoProcess));
+    }
+
+    #[test]
+    fn a_missing_executable_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, shown, kind) = fx.fault(&GOOD.replace("\"agp-fake\"", "\"agp-nothing\""));
+        assert_eq!(line, Some(11));
+        assert!(matches!(kind, LaunchFaultKind::MissingExecutable { .. }));
+        assert!(shown.contains("bin/agp-nothing"), "{shown}");
+    }
+
+    #[test]
+    fn a_file_without_execute_permission_is_refused() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("\"tools/my-planner\"", "\"./not-exec\""));
+        assert_eq!(line, Some(18));
+        assert!(matches!(kind, LaunchFaultKind::MissingExecutable { .. }));
+    }
+
+    #[test]
+    fn a_scenario_neither_built_in_nor_a_file_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, shown, kind) = fx.fault(&GOOD.replace("\"triangle\"", "\"hexagon\""));
+        assert_eq!(line, Some(3));
+        assert!(matches!(kind, LaunchFaultKind::UnknownScenario { .. }));
+        assert!(
+            shown.contains("square, triangle, lshape, circle"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn a_reserved_env_variable_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let (line, _, kind) = fx.fault(&GOOD.replace("RUST_LOG", "AGP_INSTANCE"));
+        assert_eq!(line, Some(13));
+        assert!(matches!(kind, LaunchFaultKind::BadEnv { .. }));
+    }
+
+    #[test]
+    fn every_fault_of_a_file_is_reported_at_once() {
+        let fx = Fixture::new();
+        let text = GOOD
+            .replace("\"on-failure\"", "\"sometimes\"")
+            .replace("rate_hz = 320", "rate_hz = -1")
+            .replace("\"agp-fake\"", "\"agp-nothing\"");
+        let err = fx.parse(&text).expect_err("refused");
+        let lines: Vec<_> = err.faults.iter().map(|f| f.line).collect();
+        assert_eq!(lines, [Some(7), Some(11), Some(14)]);
+        assert_eq!(err.to_string().lines().count(), 3);
+    }
+
+    #[test]
+    fn an_unreadable_file_is_refused() {
+        let fx = Fixture::new();
+        let err = LaunchConfig::load(&fx.dir.path().join("absent.toml"), &fx.options())
+            .expect_err("refused");
+        assert!(matches!(err.faults[0].kind, LaunchFaultKind::Read(_)));
+        assert!(err.to_string().contains("absent.toml"));
+    }
+
+    #[test]
+    fn on_failure_restarts_a_crash_until_max_restarts_then_fails_the_run() {
+        let r = RestartConfig {
+            policy: RestartPolicy::OnFailure,
+            max_restarts: 2,
+            backoff: Duration::from_millis(100),
+        };
+        assert_eq!(
+            r.decide(false, 0),
+            ExitDecision::Restart {
+                nth: 1,
+                delay: Duration::from_millis(100)
+            }
+        );
+        assert_eq!(
+            r.decide(false, 1),
+            ExitDecision::Restart {
+                nth: 2,
+                delay: Duration::from_millis(200)
+            }
+        );
+        assert_eq!(r.decide(false, 2), ExitDecision::FailRun);
+        assert_eq!(r.decide(true, 0), ExitDecision::Done);
+    }
+
+    #[test]
+    fn never_fails_the_run_on_a_crash_and_accepts_a_clean_exit() {
+        let r = RestartConfig::default();
+        assert_eq!(r.decide(false, 0), ExitDecision::FailRun);
+        assert_eq!(r.decide(true, 0), ExitDecision::Done);
+    }
+
+    #[test]
+    fn always_restarts_a_clean_exit_too() {
+        let r = RestartConfig {
+            policy: RestartPolicy::Always,
+            max_restarts: 1,
+            backoff: Duration::ZERO,
+        };
+        assert!(matches!(
+            r.decide(true, 0),
+            ExitDecision::Restart { nth: 1, .. }
+        ));
+        assert_eq!(r.decide(true, 1), ExitDecision::FailRun);
+    }
+
+    #[test]
+    fn the_backoff_doubles_and_stops_at_its_cap() {
+        let r = RestartConfig {
+            backoff: Duration::from_millis(200),
+            ..RestartConfig::default()
+        };
+        assert_eq!(r.delay_before(1), Duration::from_millis(200));
+        assert_eq!(r.delay_before(3), Duration::from_millis(800));
+        assert_eq!(r.delay_before(40), MAX_RESTART_DELAY);
+    }
+}

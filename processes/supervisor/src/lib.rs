@@ -1,0 +1,9 @@
+//! The supervisor's pure logic: the launch file and the restart policy, testable without shared memory.
+
+mod launch;
+
+pub use launch::{
+    BUILTIN_SCENARIOS, CONTEXT_ENV, ClockConfig, ClockMode, DEFAULT_RATE_HZ, DEFAULT_STOP_GRACE,
+    ExitDecision, LaunchConfig, LaunchConfigParseError, LaunchFault, LaunchFaultKind,
+    LaunchOptions, MAX_RESTART_DELAY, ProcessConfig, RestartConfig, RestartPolicy, ScenarioSource,
+};

@@ -1,0 +1,534 @@
+//! `agp up`: owns one instance for the length of a run: its lock, its iceoryx2 services, its
+//! processes, and the removal of every file it leaves.
+
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use agp_shared_types::{
+    GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
+};
+use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
+use anyhow::{Context, Result, anyhow};
+use iceoryx2::node::{NodeState, NodeView};
+use iceoryx2::prelude::{CallbackProgression, Node, ipc};
+
+use crate::instance_lock::InstanceLock;
+use crate::signals;
+
+/// How often the supervisor looks at its children and its signal flags.
+const POLL: Duration = Duration::from_millis(10);
+
+/// How long leftover nodes of a previous run may take to die (their supervisor just died
+/// and the kernel is killing them) before `up` refuses to clean their files.
+const LEFTOVER_DEATH_WAIT: Duration = Duration::from_secs(3);
+
+/// Why a run ended.
+#[derive(Debug)]
+enum RunEnd {
+    /// A process marked `ends_run` exited with status 0.
+    Finished { process: String },
+    /// The supervisor got a stop signal.
+    Signal(i32),
+    /// A process failed past its restart policy, or could not be started.
+    Failed { process: String, why: String },
+    /// Nothing runs any more and nothing ended the run.
+    AllExited,
+}
+
+impl RunEnd {
+    fn exit_code(&self) -> u8 {
+        match self {
+            Self::Finished { .. } => 0,
+            Self::Signal(s) => u8::try_from(128 + s).unwrap_or(1),
+            Self::Failed { .. } | Self::AllExited => 1,
+        }
+    }
+}
+
+/// Prints one status line per event, stamped with the time since `up` started.
+struct Log {
+    start: Instant,
+}
+
+impl Log {
+    fn event(&self, process: &str, what: std::fmt::Arguments<'_>) {
+        println!(
+            "[{:8.3} s] {process}: {what}",
+            self.start.elapsed().as_secs_f64()
+        );
+    }
+
+    fn note(&self, what: std::fmt::Arguments<'_>) {
+        println!("[{:8.3} s] {what}", self.start.elapsed().as_secs_f64());
+    }
+}
+
+/// The instance's services, created by the supervisor before any child so they outlive
+/// every child (a restarted child finds them, and its dead predecessor's ports are cleaned).
+struct Services {
+    _ir_frames: Topic<IrFrame>,
+    _ground_truth: Topic<GroundTruth>,
+    _motor_commands: Topic<MotorCommand>,
+    _resets: Topic<Reset>,
+    _estimates: Topic<ObjectEstimate>,
+    _grids: Topic<GradientGrid>,
+    _task: Topic<Task>,
+}
+
+impl Services {
+    fn open(instance: &Instance, node: &Node<ipc::Service>) -> Result<Self> {
+        Ok(Self {
+            _ir_frames: instance.ir_frames(node).context("ir_frames")?,
+            _ground_truth: instance.ground_truth(node).context("ground_truth")?,
+            _motor_commands: instance.motor_commands(node).context("motor_commands")?,
+            _resets: instance.resets(node).context("resets")?,
+            _estimates: instance.estimates(node).context("estimates")?,
+            _grids: instance.grids(node).context("grids")?,
+            _task: instance.task(node).context("task")?,
+        })
+    }
+}
+
+enum SlotState {
+    Running(Child),
+    /// Waiting for its backoff before restart number `nth`.
+    Pending {
+        at: Instant,
+        nth: u32,
+    },
+    Done,
+}
+
+/// One `[[process]]` of the launch file and what became of it.
+struct Slot<'a> {
+    process: &'a ProcessConfig,
+    state: SlotState,
+    restarts: u32,
+}
+
+/// Runs `config` until it ends; returns the exit status of `agp up`. Errors are for what
+/// happens before any child starts (lock, leftovers, services).
+pub fn up(config: &LaunchConfig) -> Result<u8> {
+    signals::install().context("cannot install the signal handlers")?;
+    let log = Log {
+        start: Instant::now(),
+    };
+    let instance = Instance::new(&config.instance)
+        .map_err(|e| anyhow!("bad instance name `{}`: {e}", config.instance))?;
+    let lock = InstanceLock::acquire(&instance)?;
+
+    clean_leftovers(&instance, &log)?;
+    std::fs::create_dir_all(&config.results).with_context(|| {
+        format!(
+            "cannot create the results folder {}",
+            config.results.display()
+        )
+    })?;
+    println!(
+        "agp: instance `{}`: {} process{}, scenario {}, {} at {} Hz, results in {}",
+        config.instance,
+        config.processes.len(),
+        if config.processes.len() == 1 {
+            ""
+        } else {
+            "es"
+        },
+        config.scenario,
+        config.clock.mode.as_str(),
+        config.clock.rate_hz,
+        config.results.display()
+    );
+
+    let node = instance
+        .node("agp", false)
+        .map_err(|e| anyhow!("cannot create the supervisor's iceoryx2 node: {e:?}"))?;
+    let services = match Services::open(&instance, &node) {
+        Ok(s) => s,
+        Err(e) => {
+            drop(node);
+            let _ = instance.remove_files();
+            return Err(e.context(format!(
+                "cannot create the services of instance `{}`",
+                config.instance
+            )));
+        }
+    };
+
+    let mut slots: Vec<Slot<'_>> = config
+        .processes
+        .iter()
+        .map(|process| Slot {
+            process,
+            state: SlotState::Done,
+            restarts: 0,
+        })
+        .collect();
+    let end = run(config, &mut slots, &node, &log);
+
+    stop_all(&mut slots, &log);
+    node.try_cleanup_dead_nodes();
+    drop(services);
+    drop(node);
+    let mut code = end.exit_code();
+    match instance.remove_files() {
+        Ok(_) => {}
+        Err(e) => {
+            eprintln!(
+                "agp: error: cannot remove the files of instance `{}`: {e}",
+                config.instance
+            );
+            code = code.max(1);
+        }
+    }
+    let left = instance.files();
+    if !left.is_empty() {
+        eprintln!(
+            "agp: error: {} file(s) of instance `{}` remain: {:?}",
+            left.len(),
+            config.instance,
+            left
+        );
+        code = code.max(1);
+    }
+    drop(lock);
+
+    match &end {
+        RunEnd::Finished { process } => {
+            log.note(format_args!("run over: `{process}` finished it"));
+        }
+        RunEnd::Signal(s) => {
+            log.note(format_args!("stopped by {}", signals::name(*s)));
+        }
+        RunEnd::Failed { process, why } => {
+            eprintln!("agp: error: process `{process}` {why}");
+        }
+        RunEnd::AllExited => {
+            eprintln!("agp: error: every process exited and none is marked `ends_run`");
+        }
+    }
+    Ok(code)
+}
+
+/// Removes what a previous run of this instance left, once no node of it is alive. The
+/// caller holds the instance lock, so no supervisor owns these files.
+fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
+    let deadline = Instant::now() + LEFTOVER_DEATH_WAIT;
+    loop {
+        let alive = alive_nodes(instance);
+        if alive.is_empty() {
+            break;
+        }
+        if Instant::now() >= deadline {
+            anyhow::bail!(
+                "instance `{}` has live processes not started by a supervisor ({}); stop them or pick another name with `--instance`",
+                instance.name(),
+                alive.join(", ")
+            );
+        }
+        std::thread::sleep(POLL);
+    }
+    let removed = instance.remove_files().with_context(|| {
+        format!(
+            "cannot remove the leftovers of instance `{}`",
+            instance.name()
+        )
+    })?;
+    if removed > 0 {
+        log.note(format_args!(
+            "removed {removed} leftover file(s) of instance `{}` (its last supervisor died)",
+            instance.name()
+        ));
+    }
+    Ok(())
+}
+
+/// The live iceoryx2 nodes of `instance`, as `name (pid N)`.
+fn alive_nodes(instance: &Instance) -> Vec<String> {
+    let mut alive = Vec::new();
+    let listed = Node::<ipc::Service>::list(instance.config(), |state| {
+        if let NodeState::Alive(view) = state {
+            alive.push(match view.details() {
+                Some(d) => format!("node `{}` (pid {})", d.name(), d.process_id()),
+                None => "a node".to_owned(),
+            });
+        }
+        CallbackProgression::Continue
+    });
+    // A half-removed leftover can fail to list; then nothing in it is alive to protect.
+    if listed.is_err() {
+        alive.clear();
+    }
+    alive
+}
+
+/// Starts the processes in order, then watches them until the run ends.
+fn run(
+    config: &LaunchConfig,
+    slots: &mut [Slot<'_>],
+    node: &Node<ipc::Service>,
+    log: &Log,
+) -> RunEnd {
+    for slot in slots.iter_mut() {
+        if let Some(s) = signals::first() {
+            return RunEnd::Signal(s);
+        }
+        if let Err(end) = slot.start(config, log, None) {
+            return end;
+        }
+    }
+    loop {
+        if let Some(s) = signals::first() {
+            return RunEnd::Signal(s);
+        }
+        let now = Instant::now();
+        for slot in slots.iter_mut() {
+            if let Some(end) = slot.poll(config, node, log, now) {
+                return end;
+            }
+        }
+        if slots.iter().all(|s| matches!(s.state, SlotState::Done)) {
+            return RunEnd::AllExited;
+        }
+        std::thread::sleep(POLL);
+    }
+}
+
+impl Slot<'_> {
+    /// Spawns the process; `nth` is the restart number, if this is a restart.
+    fn start(&mut self, config: &LaunchConfig, log: &Log, nth: Option<u32>) -> Result<(), RunEnd> {
+        match spawn(config, self.process) {
+            Ok(child) => {
+                let pid = child.id();
+                match nth {
+                    None => log.event(&self.process.name, format_args!("started, pid {pid}")),
+                    Some(n) => log.event(
+                        &self.process.name,
+                        format_args!(
+                            "restarted ({n} of {}), pid {pid}",
+                            self.process.restart.max_restarts
+                        ),
+                    ),
+                }
+                self.state = SlotState::Running(child);
+                Ok(())
+            }
+            Err(e) => {
+                self.state = SlotState::Done;
+                Err(RunEnd::Failed {
+                    process: self.process.name.clone(),
+                    why: format!(
+                        "could not be started from {}: {e}",
+                        self.process.exec.display()
+                    ),
+                })
+            }
+        }
+    }
+
+    /// Reaps an exit, or starts a pending restart whose time came.
+    fn poll(
+        &mut self,
+        config: &LaunchConfig,
+        node: &Node<ipc::Service>,
+        log: &Log,
+        now: Instant,
+    ) -> Option<RunEnd> {
+        let process = self.process;
+        let name = &process.name;
+        match &mut self.state {
+            SlotState::Running(child) => {
+                let status = match child.try_wait() {
+                    Ok(None) => return None,
+                    Ok(Some(status)) => status,
+                    Err(e) => {
+                        return Some(RunEnd::Failed {
+                            process: name.clone(),
+                            why: format!("could not be watched: {e}"),
+                        });
+                    }
+                };
+                self.state = SlotState::Done;
+                log.event(name, format_args!("{}", describe(status)));
+                // Its ports die with it: free their slots before anyone restarts.
+                node.try_cleanup_dead_nodes();
+                if process.ends_run && status.success() {
+                    return Some(RunEnd::Finished {
+                        process: name.clone(),
+                    });
+                }
+                match process.restart.decide(status.success(), self.restarts) {
+                    ExitDecision::Done => None,
+                    ExitDecision::Restart { nth, delay } => {
+                        self.state = SlotState::Pending {
+                            at: now + delay,
+                            nth,
+                        };
+                        None
+                    }
+                    ExitDecision::FailRun => {
+                        let r = &process.restart;
+                        let why = if self.restarts > 0 {
+                            format!(
+                                "{} after {} restart(s) (policy `{}`, max_restarts {})",
+                                describe(status),
+                                self.restarts,
+                                r.policy.as_str(),
+                                r.max_restarts
+                            )
+                        } else {
+                            format!("{} (policy `{}`)", describe(status), r.policy.as_str())
+                        };
+                        Some(RunEnd::Failed {
+                            process: name.clone(),
+                            why,
+                        })
+                    }
+                }
+            }
+            SlotState::Pending { at, nth } if now >= *at => {
+                let nth = *nth;
+                self.restarts = nth;
+                self.start(config, log, Some(nth)).err()
+            }
+            SlotState::Pending { .. } | SlotState::Done => None,
+        }
+    }
+}
+
+/// Starts one process with its context in the environment, in a process group of its own
+/// (a Ctrl-C at the terminal reaches only the supervisor, which then stops it), killed by
+/// the kernel if the supervisor dies.
+fn spawn(config: &LaunchConfig, process: &ProcessConfig) -> std::io::Result<Child> {
+    let mut cmd = Command::new(&process.exec);
+    cmd.args(&process.args)
+        .envs(&process.env)
+        .envs(config.context_env(process))
+        .stdin(Stdio::null());
+    spawn_guarded(&mut cmd)
+}
+
+/// Spawns `cmd` in a process group of its own, killed by the kernel if `agp` dies.
+pub(crate) fn spawn_guarded(cmd: &mut Command) -> std::io::Result<Child> {
+    cmd.process_group(0);
+    let parent = libc::pid_t::try_from(std::process::id()).unwrap_or(0);
+    // SAFETY: between fork and exec only async-signal-safe calls: prctl, getppid, _exit.
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The supervisor died before prctl took effect: nobody would ever stop us.
+            if libc::getppid() != parent {
+                libc::_exit(1);
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn()
+}
+
+/// How a process ended, for status lines.
+fn describe(status: ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(code), _) => format!("exited with status {code}"),
+        (None, Some(sig)) => format!("was killed by {}", signals::name(sig)),
+        (None, None) => format!("ended ({status})"),
+    }
+}
+
+/// Sends `signal` to the process group of `child` (the child and anything it started).
+pub(crate) fn signal_group(child: &Child, signal: libc::c_int) {
+    let Ok(pid) = libc::pid_t::try_from(child.id()) else {
+        return;
+    };
+    // SAFETY: plain kill(2); the child is not reaped yet, so its pid is still ours.
+    unsafe {
+        if libc::kill(-pid, signal) != 0 {
+            libc::kill(pid, signal);
+        }
+    }
+}
+
+/// SIGTERM to every running process, SIGKILL to those still alive after their grace period
+/// (at once after a second stop signal), and every one reaped.
+fn stop_all(slots: &mut [Slot<'_>], log: &Log) {
+    struct Stopping {
+        index: usize,
+        deadline: Instant,
+        killed: bool,
+    }
+    let signals_before = signals::count();
+    let now = Instant::now();
+    let mut stopping = Vec::new();
+    for (index, slot) in slots.iter_mut().enumerate().rev() {
+        match &slot.state {
+            SlotState::Running(child) => {
+                signal_group(child, libc::SIGTERM);
+                stopping.push(Stopping {
+                    index,
+                    deadline: now + slot.process.stop_grace,
+                    killed: false,
+                });
+            }
+            SlotState::Pending { .. } => slot.state = SlotState::Done,
+            SlotState::Done => {}
+        }
+    }
+    if stopping.is_empty() {
+        return;
+    }
+    log.note(format_args!(
+        "stopping {} process{} (SIGTERM)",
+        stopping.len(),
+        if stopping.len() == 1 { "" } else { "es" }
+    ));
+    while !stopping.is_empty() {
+        let now = Instant::now();
+        let hurry = signals::count() > signals_before;
+        stopping.retain_mut(|s| {
+            let slot = &mut slots[s.index];
+            let SlotState::Running(child) = &mut slot.state else {
+                return false;
+            };
+            match child.try_wait() {
+                Ok(Some(status)) => {
+                    log.event(
+                        &slot.process.name,
+                        format_args!("stopped: {}", describe(status)),
+                    );
+                    slot.state = SlotState::Done;
+                    return false;
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    log.event(&slot.process.name, format_args!("cannot be watched: {e}"));
+                    slot.state = SlotState::Done;
+                    return false;
+                }
+            }
+            if !s.killed && (hurry || now >= s.deadline) {
+                signal_group(child, libc::SIGKILL);
+                s.killed = true;
+                if hurry {
+                    log.event(
+                        &slot.process.name,
+                        format_args!("SIGKILL (second stop signal)"),
+                    );
+                } else {
+                    log.event(
+                        &slot.process.name,
+                        format_args!(
+                            "still running {:.1} s after SIGTERM: SIGKILL",
+                            slot.process.stop_grace.as_secs_f64()
+                        ),
+                    );
+                }
+            }
+            true
+        });
+        if !stopping.is_empty() {
+            std::thread::sleep(POLL);
+        }
+    }
+}
