@@ -1,0 +1,286 @@
+//! Choosing the next push with an affordance gradient: the paper's `planBestPush`, done as
+//! a search over contact point, alpha and push length with the AG's continuous prediction.
+//!
+//! The paper switches between three aims (the distance to the goal; the rotation when the
+//! orientation is more than 30 deg off; a mix near the goal). Here one cost does all three:
+//! the predicted distance to the goal plus the predicted orientation error weighted in
+//! metres per radian, and the push that minimises it wins. Far from the goal the distance
+//! dominates; near it, a push that turns the object towards its goal orientation wins as
+//! soon as the turn is worth more than the distance it costs. Shorter pushes are part of
+//! the search, which is what lets the object settle into a 10 mm tolerance.
+
+use agp_affordance::{AffordanceGradient, Prediction};
+use agp_shared_types::Pose2;
+use agp_world::wrap_angle;
+use glam::DVec2;
+
+/// What the planner is after.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Goal {
+    /// The object's centroid at `pose`'s position and its orientation at `pose.theta`
+    /// (compared modulo the object's symmetry).
+    Place { pose: Pose2 },
+    /// The centroid at `target`, orientation free (trajectory following feeds the point
+    /// ahead on the path).
+    Reach { target: DVec2 },
+}
+
+/// How the search runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PushChoiceSettings {
+    /// Contact points tried: rays from the centroid at even angles onto the learned S.
+    pub contact_count: usize,
+    /// Alphas tried: every learned alpha's range at this step, degrees.
+    pub alpha_step_deg: f64,
+    /// Push lengths tried, as fractions of the learned push duration. The prediction of a
+    /// fraction `f` is the learned one scaled by `f` (an approximation: the object turns
+    /// during the push), so only fractions up to 1 are offered.
+    pub push_fractions: Vec<f64>,
+    /// Predictions with a lower confidence (about how many trials back them) are skipped.
+    pub min_confidence: f64,
+    /// Metres of distance one radian of orientation error is worth (1 mm per degree by
+    /// default: the 10 mm / 10 deg tolerance of the benchmark weighs them equally).
+    pub orientation_weight_m_per_rad: f64,
+    /// Rotational symmetry of the object (0: a disc, orientation ignored; 1: none).
+    pub symmetry_order: u32,
+    /// Radius (m) of the centroid-centred circle the robot starts each push from: the one
+    /// the learning trials started from, so that an alpha means the same thing.
+    pub start_radius_m: f64,
+}
+
+impl PushChoiceSettings {
+    /// Defaults for an object of the given symmetry pushed from `start_radius_m`.
+    pub fn new(symmetry_order: u32, start_radius_m: f64) -> Self {
+        Self {
+            contact_count: 120,
+            alpha_step_deg: 2.5,
+            push_fractions: vec![1.0, 0.5, 0.25],
+            min_confidence: 0.5,
+            orientation_weight_m_per_rad: 1e-3 * 180.0 / std::f64::consts::PI,
+            symmetry_order,
+            start_radius_m,
+        }
+    }
+}
+
+/// One chosen push.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushPlan {
+    /// Where the robot's heading line meets the object, object frame, metres (the AG's key).
+    pub contact_obj: DVec2,
+    pub alpha_deg: f64,
+    /// Fraction of the learned push duration.
+    pub fraction: f64,
+    /// The AG's prediction, scaled by `fraction`, in the object's frame before the push.
+    pub prediction: Prediction,
+    /// The object's predicted pose after the push, world frame.
+    pub predicted: Pose2,
+    /// Cost of the predicted pose; compare with [`PushPlanner::cost`] of the present one.
+    pub cost: f64,
+    /// Where the robot starts the push and the heading it drives at, world frame.
+    pub start: Pose2,
+}
+
+/// Chooses pushes for one object from its affordance gradient.
+#[derive(Debug, Clone)]
+pub struct PushPlanner {
+    settings: PushChoiceSettings,
+    contacts: Vec<DVec2>,
+    alphas: Vec<f64>,
+    radius: f64,
+}
+
+impl PushPlanner {
+    /// Precomputes the contact candidates and the alphas to try (allocates; once per AG).
+    pub fn new(ag: &AffordanceGradient, settings: PushChoiceSettings) -> Self {
+        let contacts = ag.contact_candidates(settings.contact_count);
+        let radius = contacts.iter().map(|c| c.length()).fold(0.0, f64::max);
+        let learned: Vec<f64> = ag.alphas_deg().collect();
+        let lo = learned.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = learned.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let mut alphas = Vec::new();
+        if lo.is_finite() && hi.is_finite() {
+            let step = settings.alpha_step_deg.max(0.1);
+            let n = ((hi - lo) / step).round() as usize;
+            for k in 0..=n {
+                alphas.push((lo + k as f64 * step).min(hi));
+            }
+        }
+        Self {
+            settings,
+            contacts,
+            alphas,
+            radius,
+        }
+    }
+
+    pub fn settings(&self) -> &PushChoiceSettings {
+        &self.settings
+    }
+
+    /// The farthest contact candidate from the centroid: the object's learned radius, m.
+    pub fn object_radius(&self) -> f64 {
+        self.radius
+    }
+
+    /// The contact candidates, object frame.
+    pub fn contacts(&self) -> &[DVec2] {
+        &self.contacts
+    }
+
+    /// How far `pose` is from `goal`: metres plus weighted orientation error.
+    pub fn cost(&self, pose: Pose2, goal: &Goal) -> f64 {
+        match goal {
+            Goal::Place { pose: g } => {
+                let d = DVec2::new(pose.x - g.x, pose.y - g.y).length();
+                let e = symmetric_angle_error(pose.theta - g.theta, self.settings.symmetry_order);
+                d + self.settings.orientation_weight_m_per_rad * e.abs()
+            }
+            Goal::Reach { target } => (DVec2::new(pose.x, pose.y) - *target).length(),
+        }
+    }
+
+    /// The push whose predicted outcome is closest to `goal` from the object's estimated
+    /// pose `estimate` (world frame); `None` if the AG predicts nothing anywhere.
+    pub fn plan(&self, ag: &AffordanceGradient, estimate: Pose2, goal: &Goal) -> Option<PushPlan> {
+        let mut best: Option<PushPlan> = None;
+        for &c in &self.contacts {
+            for &alpha in &self.alphas {
+                let Some(p) = ag.predict(c, alpha) else {
+                    continue;
+                };
+                if p.confidence < self.settings.min_confidence {
+                    continue;
+                }
+                for &f in &self.settings.push_fractions {
+                    let scaled = Prediction {
+                        displacement: p.displacement * f,
+                        rotation_rad: p.rotation_rad * f,
+                        ..p
+                    };
+                    let predicted = scaled.apply_to(estimate);
+                    let cost = self.cost(predicted, goal);
+                    if best.is_some_and(|b| b.cost <= cost) {
+                        continue;
+                    }
+                    let Some((s, h)) = approach_start(c, alpha, self.settings.start_radius_m)
+                    else {
+                        continue;
+                    };
+                    let rot = DVec2::from_angle(estimate.theta);
+                    let sw = DVec2::new(estimate.x, estimate.y) + rot.rotate(s);
+                    best = Some(PushPlan {
+                        contact_obj: c,
+                        alpha_deg: alpha,
+                        fraction: f,
+                        prediction: scaled,
+                        predicted,
+                        cost,
+                        start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
+                    });
+                }
+            }
+        }
+        best
+    }
+}
+
+/// `angle` (radians) wrapped to the nearest equivalent under a symmetry of `order`
+/// (0: every angle is equivalent, the error is 0; 1: none, wrap to (-pi, pi]).
+pub fn symmetric_angle_error(angle: f64, order: u32) -> f64 {
+    if order == 0 {
+        return 0.0;
+    }
+    let period = std::f64::consts::TAU / f64::from(order);
+    let a = angle.rem_euclid(period);
+    if a > 0.5 * period { a - period } else { a }
+}
+
+/// Where on the centroid-centred circle of radius `radius` a push with deviation
+/// `alpha_deg` must start so that the robot's heading line goes through `contact_obj`:
+/// the start position and heading, object frame. The heading is the direction to the
+/// centroid turned by alpha (counter-clockwise positive), as in the learning trials.
+///
+/// Of the starts whose line passes through the contact ahead of the robot, the one
+/// nearest to the contact (the contact is then on the near side of the object). `None`
+/// if no start reaches the contact (it is outside the circle, or alpha is too large for
+/// a contact that close to the centroid's line).
+pub fn approach_start(contact_obj: DVec2, alpha_deg: f64, radius: f64) -> Option<(DVec2, f64)> {
+    if !(contact_obj.is_finite() && alpha_deg.is_finite() && radius > contact_obj.length()) {
+        return None;
+    }
+    let alpha = alpha_deg.to_radians();
+    // With u the heading and s the start, u = rot(alpha)(-s / |s|) gives
+    // u x s = radius sin(alpha), and c = s + t u on the line gives u x c = u x s; with
+    // gamma the angle of c that is |c| sin(gamma - h) = radius sin(alpha).
+    let q = radius * alpha.sin() / contact_obj.length();
+    if !(-1.0..=1.0).contains(&q) {
+        return None;
+    }
+    let gamma = contact_obj.to_angle();
+    let mut best: Option<(f64, DVec2, f64)> = None;
+    for h in [gamma - q.asin(), gamma - std::f64::consts::PI + q.asin()] {
+        let u = DVec2::from_angle(h);
+        // |c - t u| = radius with t > 0: the positive root (|c| < radius).
+        let cu = contact_obj.dot(u);
+        let t = cu + (cu * cu - contact_obj.length_squared() + radius * radius).sqrt();
+        let s = contact_obj - t * u;
+        // The deviation is alpha, not pi - alpha: the robot heads towards the centroid.
+        if t > 0.0 && u.dot(-s) > 0.0 && best.is_none_or(|b| t < b.0) {
+            best = Some((t, s, wrap_angle(h)));
+        }
+    }
+    best.map(|(_, s, h)| (s, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_straight_push_starts_on_the_contacts_own_ray() {
+        let c = DVec2::new(0.03, 0.04);
+        let (s, h) = approach_start(c, 0.0, 0.1).expect("a start");
+        assert!((s - c.normalize() * 0.1).length() < 1e-9, "{s}");
+        assert!(
+            (wrap_angle(h - (-c).to_angle())).abs() < 1e-9,
+            "heading {h} is not towards the centroid"
+        );
+    }
+
+    #[test]
+    fn an_alpha_push_starts_where_its_line_meets_the_contact_at_that_alpha() {
+        for alpha in [-15.0_f64, -7.5, 5.0, 15.0] {
+            for c in [
+                DVec2::new(-0.05, 0.0),
+                DVec2::new(0.02, -0.04),
+                DVec2::new(0.0, 0.057),
+            ] {
+                let r = 0.1;
+                let (s, h) = approach_start(c, alpha, r).expect("a start");
+                assert!((s.length() - r).abs() < 1e-9);
+                let u = DVec2::from_angle(h);
+                // The heading line passes through the contact, ahead of the robot...
+                assert!(u.perp_dot(c - s).abs() < 1e-7, "alpha {alpha}, c {c}");
+                assert!(u.dot(c - s) > 0.0);
+                // ...and makes the angle alpha with the direction to the centroid.
+                let dev = wrap_angle(h - (-s).to_angle()).to_degrees();
+                assert!((dev - alpha).abs() < 1e-6, "deviation {dev} vs {alpha}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_contact_outside_the_start_circle_has_no_start() {
+        assert!(approach_start(DVec2::new(0.2, 0.0), 0.0, 0.1).is_none());
+    }
+
+    #[test]
+    fn orientation_errors_wrap_by_the_objects_symmetry() {
+        let deg = f64::to_radians;
+        assert!((symmetric_angle_error(deg(100.0), 3) - deg(-20.0)).abs() < 1e-12);
+        assert!((symmetric_angle_error(deg(80.0), 4) - deg(-10.0)).abs() < 1e-12);
+        assert!((symmetric_angle_error(deg(190.0), 1) - deg(-170.0)).abs() < 1e-12);
+        assert_eq!(symmetric_angle_error(1.0, 0), 0.0);
+    }
+}
