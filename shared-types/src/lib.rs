@@ -8,11 +8,16 @@
 //!
 //! Units: SI inside (metres, seconds, radians), as in the rest of the code.
 
+mod control;
 mod driver;
 mod instance;
 mod payloads;
 mod wait;
 
+pub use control::{
+    ControlKind, ControlOpenError, ControlRequest, ControlResponse, ControlService,
+    MAX_STATUS_PROCESSES, ProcessState, ProcessStatus, read_str, write_str,
+};
 pub use driver::{DriveError, LockstepDriver};
 pub use instance::{
     Instance, InstanceNameError, MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, ServiceNames, Topic,

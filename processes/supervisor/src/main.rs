@@ -1,5 +1,6 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
+mod control;
 mod instance_lock;
 mod probe;
 mod signals;
@@ -26,6 +27,10 @@ enum Cmd {
     /// as their policy says, and stop them all (leaving no file behind) on Ctrl-C, SIGTERM,
     /// or when a process marked `ends_run` exits with status 0.
     Up(UpArgs),
+    /// Show each process of a running instance: state, pid, restarts, uptime.
+    Status(StatusArgs),
+    /// Stop a running instance: every process, then every file of it.
+    Down(DownArgs),
     /// Measure what the simulated world does.
     Probe {
         #[command(subcommand)]
@@ -41,6 +46,37 @@ struct UpArgs {
     /// Run under this instance name instead of the file's.
     #[arg(long)]
     instance: Option<String>,
+    /// Return once every process is running, leaving the supervisor in the background
+    /// (its output goes to `agp-up-<instance>.log` in the results folder). Stop it with
+    /// `agp down`.
+    #[arg(long)]
+    detach: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct StatusArgs {
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    launch: PathBuf,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct DownArgs {
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    launch: PathBuf,
+    /// Give up waiting for the stop after this many seconds.
+    #[arg(long, default_value_t = 60)]
+    timeout_s: u64,
 }
 
 #[derive(Debug, Subcommand)]
@@ -62,6 +98,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Cmd::Up(args) => up(args),
+        Cmd::Status(args) => status(args),
+        Cmd::Down(args) => down(args),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {
@@ -94,5 +132,108 @@ fn up(args: &UpArgs) -> Result<u8> {
             return Ok(2);
         }
     };
+    if args.detach && std::env::var_os(DETACHED_ENV).is_none() {
+        return detach(args, &config);
+    }
     up::up(&config)
+}
+
+/// Set in the environment of the background supervisor `--detach` starts.
+const DETACHED_ENV: &str = "AGP_DETACHED";
+
+/// `agp up --detach`: starts `agp up` again in a session of its own with its output in a
+/// log file, and returns once its status says every process runs.
+fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
+    use std::os::unix::process::CommandExt;
+    std::fs::create_dir_all(&config.results).with_context(|| {
+        format!(
+            "cannot create the results folder {}",
+            config.results.display()
+        )
+    })?;
+    let log_path = config
+        .results
+        .join(format!("agp-up-{}.log", config.instance));
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("cannot create {}", log_path.display()))?;
+    let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+    let mut cmd = std::process::Command::new(exe);
+    cmd.arg("up").arg(&args.launch);
+    if let Some(i) = &args.instance {
+        cmd.args(["--instance", i]);
+    }
+    cmd.env(DETACHED_ENV, "1")
+        .stdin(std::process::Stdio::null())
+        .stdout(log.try_clone().context("cannot share the log file")?)
+        .stderr(log);
+    // SAFETY: setsid is async-signal-safe; the child leaves our session and terminal.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::setsid() < 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let mut child = cmd
+        .spawn()
+        .context("cannot start the background supervisor")?;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        if let Some(status) = child
+            .try_wait()
+            .context("cannot watch the background supervisor")?
+        {
+            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+            eprint!("{text}");
+            anyhow::bail!(
+                "the background supervisor ended ({status}) before every process ran; its log: {}",
+                log_path.display()
+            );
+        }
+        if let Ok(r) = control::ask(&config.instance, agp_shared_types::ControlKind::Status) {
+            let report = control::StatusReport::new(&config.instance, &r);
+            if report.all_running() {
+                report.print();
+                println!(
+                    "agp: instance `{}` runs in the background; log {}; stop it with `agp down --instance {}`",
+                    config.instance,
+                    log_path.display(),
+                    config.instance
+                );
+                return Ok(0);
+            }
+        }
+        if std::time::Instant::now() >= deadline {
+            anyhow::bail!(
+                "not every process of instance `{}` runs after 60 s; see {} and `agp status --instance {}`",
+                config.instance,
+                log_path.display(),
+                config.instance
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+fn status(args: &StatusArgs) -> Result<u8> {
+    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let r = control::ask(&name, agp_shared_types::ControlKind::Status)?;
+    let report = control::StatusReport::new(&name, &r);
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).context("cannot encode the status")?
+        );
+    } else {
+        report.print();
+    }
+    Ok(0)
+}
+
+fn down(args: &DownArgs) -> Result<u8> {
+    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    control::down(&name, std::time::Duration::from_secs(args.timeout_s))?;
+    println!("agp: instance `{name}` is down");
+    Ok(0)
 }

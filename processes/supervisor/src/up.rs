@@ -6,11 +6,14 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{
-    GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
+    ControlKind, ControlRequest, ControlResponse, GradientGrid, GroundTruth, Instance, IrFrame,
+    MAX_STATUS_PROCESSES, MotorCommand, ObjectEstimate, ProcessState, Reset, Task, Topic,
+    write_str,
 };
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
 use iceoryx2::node::{NodeState, NodeView};
+use iceoryx2::port::server::Server;
 use iceoryx2::prelude::{CallbackProgression, Node, ipc};
 
 use crate::instance_lock::InstanceLock;
@@ -34,12 +37,14 @@ enum RunEnd {
     Failed { process: String, why: String },
     /// Nothing runs any more and nothing ended the run.
     AllExited,
+    /// `agp down` asked for it.
+    Down,
 }
 
 impl RunEnd {
     fn exit_code(&self) -> u8 {
         match self {
-            Self::Finished { .. } => 0,
+            Self::Finished { .. } | Self::Down => 0,
             Self::Signal(s) => u8::try_from(128 + s).unwrap_or(1),
             Self::Failed { .. } | Self::AllExited => 1,
         }
@@ -105,7 +110,12 @@ struct Slot<'a> {
     process: &'a ProcessConfig,
     state: SlotState,
     restarts: u32,
+    /// When it was last started.
+    started: Option<Instant>,
 }
+
+/// The server of the instance's control service, answering `agp status` and `agp down`.
+type ControlServer = Server<ipc::Service, ControlRequest, (), ControlResponse, ()>;
 
 /// Runs `config` until it ends; returns the exit status of `agp up`. Errors are for what
 /// happens before any child starts (lock, leftovers, services).
@@ -155,6 +165,25 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         }
     };
 
+    let control = instance.create_control(&node).and_then(|c| {
+        c.server_builder()
+            .create()
+            .map_err(|e| agp_shared_types::ControlOpenError::Create(format!("{e:?}")))
+            .map(|server| (c, server))
+    });
+    let (control, server) = match control {
+        Ok(c) => c,
+        Err(e) => {
+            drop(services);
+            drop(node);
+            let _ = instance.remove_files();
+            return Err(anyhow!(e).context(format!(
+                "cannot create the control service of instance `{}`",
+                config.instance
+            )));
+        }
+    };
+
     let mut slots: Vec<Slot<'_>> = config
         .processes
         .iter()
@@ -162,12 +191,15 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             process,
             state: SlotState::Done,
             restarts: 0,
+            started: None,
         })
         .collect();
-    let end = run(config, &mut slots, &node, &log);
+    let end = run(config, &mut slots, &node, &server, &log);
 
     stop_all(&mut slots, &log);
     node.try_cleanup_dead_nodes();
+    drop(server);
+    drop(control);
     drop(services);
     drop(node);
     let mut code = end.exit_code();
@@ -205,6 +237,9 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         }
         RunEnd::AllExited => {
             eprintln!("agp: error: every process exited and none is marked `ends_run`");
+        }
+        RunEnd::Down => {
+            log.note(format_args!("stopped by `agp down`"));
         }
     }
     Ok(code)
@@ -267,6 +302,7 @@ fn run(
     config: &LaunchConfig,
     slots: &mut [Slot<'_>],
     node: &Node<ipc::Service>,
+    server: &ControlServer,
     log: &Log,
 ) -> RunEnd {
     for slot in slots.iter_mut() {
@@ -290,6 +326,9 @@ fn run(
         if slots.iter().all(|s| matches!(s.state, SlotState::Done)) {
             return RunEnd::AllExited;
         }
+        if let Some(end) = serve(server, slots, log) {
+            return end;
+        }
         std::thread::sleep(POLL);
     }
 }
@@ -311,6 +350,7 @@ impl Slot<'_> {
                     ),
                 }
                 self.state = SlotState::Running(child);
+                self.started = Some(Instant::now());
                 Ok(())
             }
             Err(e) => {
@@ -393,6 +433,59 @@ impl Slot<'_> {
             }
             SlotState::Pending { .. } | SlotState::Done => None,
         }
+    }
+}
+
+/// Answers every pending control request; `Some` when one ends the run.
+fn serve(server: &ControlServer, slots: &[Slot<'_>], log: &Log) -> Option<RunEnd> {
+    let mut end = None;
+    loop {
+        let request = match server.receive() {
+            Ok(Some(r)) => r,
+            Ok(None) => return end,
+            Err(e) => {
+                log.note(format_args!("control service: cannot receive: {e:?}"));
+                return end;
+            }
+        };
+        let kind = ControlKind::from_u32(request.payload().kind);
+        let mut response = ControlResponse {
+            kind: request.payload().kind,
+            ok: u32::from(kind.is_some()),
+            supervisor_pid: std::process::id(),
+            uptime_ms: u64::try_from(log.start.elapsed().as_millis()).unwrap_or(u64::MAX),
+            ..ControlResponse::default()
+        };
+        if kind == Some(ControlKind::Down) {
+            log.note(format_args!("`agp down` received"));
+            end = Some(RunEnd::Down);
+        }
+        fill_status(slots, &mut response);
+        if let Err(e) = request.send_copy(response) {
+            log.note(format_args!("control service: cannot answer: {e:?}"));
+        }
+    }
+}
+
+/// Each process's state into a status reply.
+fn fill_status(slots: &[Slot<'_>], out: &mut ControlResponse) {
+    let now = Instant::now();
+    out.process_count = u32::try_from(slots.len().min(MAX_STATUS_PROCESSES)).unwrap_or(0);
+    for (slot, p) in slots.iter().zip(out.processes.iter_mut()) {
+        write_str(&mut p.name, &slot.process.name);
+        write_str(&mut p.exec, &slot.process.exec.to_string_lossy());
+        p.restarts = slot.restarts;
+        p.uptime_ms = slot.started.map_or(0, |t| {
+            u64::try_from((now - t).as_millis()).unwrap_or(u64::MAX)
+        });
+        let (state, pid) = match &slot.state {
+            SlotState::Running(child) => (ProcessState::Running, child.id()),
+            SlotState::Pending { .. } => (ProcessState::Pending, 0),
+            SlotState::Done if slot.started.is_none() => (ProcessState::Pending, 0),
+            SlotState::Done => (ProcessState::Exited, 0),
+        };
+        p.state = state as u32;
+        p.pid = pid;
     }
 }
 

@@ -1,0 +1,194 @@
+//! The client side of the control service: `agp status`, `agp down` and the wait of
+//! `agp up --detach`, talking to the running supervisor through iceoryx2.
+
+use std::fs::{File, TryLockError};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use agp_shared_types::{
+    ControlKind, ControlRequest, ControlResponse, Instance, ProcessState, read_str,
+};
+use agp_supervisor::{LaunchConfig, LaunchOptions};
+use anyhow::{Context, Result, anyhow, bail};
+use serde::Serialize;
+
+use crate::instance_lock::InstanceLock;
+
+/// How long a client waits for the supervisor's answer (a safety net: it answers within
+/// its 10 ms poll).
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The instance a command addresses: `--instance`, else the launch file's.
+pub fn instance_name(instance: Option<&str>, launch: &Path) -> Result<String> {
+    if let Some(name) = instance {
+        Instance::validate_name(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+        return Ok(name.to_owned());
+    }
+    if !launch.is_file() {
+        bail!(
+            "no --instance given and no launch file {} to take it from",
+            launch.display()
+        );
+    }
+    let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+    let options = LaunchOptions {
+        instance: None,
+        exe_dir: exe.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let config = LaunchConfig::load(launch, &options).map_err(|e| anyhow!("{e}"))?;
+    Ok(config.instance)
+}
+
+/// Whether a supervisor holds the instance's lock (it is up, or starting, or stopping).
+pub fn is_up(instance: &Instance) -> bool {
+    let Ok(file) = File::open(InstanceLock::path_of(instance)) else {
+        return false;
+    };
+    match file.try_lock_shared() {
+        Ok(()) => {
+            let _ = file.unlock();
+            false
+        }
+        Err(TryLockError::WouldBlock) => true,
+        Err(TryLockError::Error(_)) => false,
+    }
+}
+
+/// Sends one request to the instance's supervisor and returns its answer.
+pub fn ask(name: &str, kind: ControlKind) -> Result<ControlResponse> {
+    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    if !is_up(&instance) {
+        bail!("instance `{name}` is not up (no supervisor holds it)");
+    }
+    let node = instance
+        .node(&format!("agp-cli-{}", std::process::id()), false)
+        .map_err(|e| anyhow!("cannot create an iceoryx2 node on instance `{name}`: {e:?}"))?;
+    // A supervisor that just took the lock creates its service a moment later.
+    let deadline = Instant::now() + ANSWER_TIMEOUT;
+    let service = loop {
+        match instance.open_control(&node) {
+            Ok(s) => break s,
+            Err(e) if Instant::now() >= deadline || !is_up(&instance) => return Err(e.into()),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    let client = service
+        .client_builder()
+        .create()
+        .map_err(|e| anyhow!("cannot create a control client: {e:?}"))?;
+    let pending = client
+        .send_copy(ControlRequest {
+            kind: kind as u32,
+            _pad: 0,
+        })
+        .map_err(|e| anyhow!("cannot send the request: {e:?}"))?;
+    loop {
+        if let Some(response) = pending
+            .receive()
+            .map_err(|e| anyhow!("cannot receive the answer: {e:?}"))?
+        {
+            return Ok(*response.payload());
+        }
+        if Instant::now() >= deadline {
+            bail!("the supervisor of instance `{name}` did not answer within {ANSWER_TIMEOUT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// One process of `agp status --json`.
+#[derive(Debug, Serialize)]
+pub struct ProcessReport {
+    pub name: String,
+    pub state: &'static str,
+    pub pid: Option<u32>,
+    pub restarts: u32,
+    pub uptime_s: f64,
+    pub exec: String,
+}
+
+/// `agp status --json`.
+#[derive(Debug, Serialize)]
+pub struct StatusReport {
+    pub instance: String,
+    pub supervisor_pid: u32,
+    pub uptime_s: f64,
+    pub processes: Vec<ProcessReport>,
+}
+
+impl StatusReport {
+    pub fn new(instance: &str, r: &ControlResponse) -> Self {
+        let count = (r.process_count as usize).min(r.processes.len());
+        Self {
+            instance: instance.to_owned(),
+            supervisor_pid: r.supervisor_pid,
+            uptime_s: r.uptime_ms as f64 * 1e-3,
+            processes: r.processes[..count]
+                .iter()
+                .map(|p| ProcessReport {
+                    name: read_str(&p.name),
+                    state: ProcessState::from_u32(p.state).map_or("unknown", ProcessState::as_str),
+                    pid: (p.pid != 0).then_some(p.pid),
+                    restarts: p.restarts,
+                    uptime_s: p.uptime_ms as f64 * 1e-3,
+                    exec: read_str(&p.exec),
+                })
+                .collect(),
+        }
+    }
+
+    /// Whether every process is running.
+    pub fn all_running(&self) -> bool {
+        self.processes.iter().all(|p| p.state == "running")
+    }
+
+    pub fn print(&self) {
+        println!(
+            "instance `{}`: supervisor pid {}, up {:.1} s",
+            self.instance, self.supervisor_pid, self.uptime_s
+        );
+        let width = self
+            .processes
+            .iter()
+            .map(|p| p.name.len())
+            .max()
+            .unwrap_or(0)
+            .max("process".len());
+        println!(
+            "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>9}  exec",
+            "process", "state", "pid", "restarts", "uptime"
+        );
+        for p in &self.processes {
+            println!(
+                "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>7.1} s  {}",
+                p.name,
+                p.state,
+                p.pid.map_or("-".to_owned(), |pid| pid.to_string()),
+                p.restarts,
+                p.uptime_s,
+                p.exec
+            );
+        }
+    }
+}
+
+/// `agp down`: asks the supervisor to stop, then waits until it has let go of the instance
+/// (every process stopped, every file removed).
+pub fn down(name: &str, timeout: Duration) -> Result<()> {
+    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    let r = ask(name, ControlKind::Down)?;
+    if r.ok == 0 {
+        bail!("the supervisor of instance `{name}` refused to stop");
+    }
+    let deadline = Instant::now() + timeout;
+    while is_up(&instance) {
+        if Instant::now() >= deadline {
+            bail!(
+                "the supervisor of instance `{name}` (pid {}) is still stopping after {timeout:?}",
+                r.supervisor_pid
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(())
+}
