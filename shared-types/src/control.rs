@@ -12,6 +12,8 @@ pub const MAX_STATUS_PROCESSES: usize = 16;
 /// are cut at a character boundary and end in `...`).
 pub const STATUS_NAME_LEN: usize = 32;
 pub const STATUS_PATH_LEN: usize = 256;
+/// Room for a swap's planner arguments, NUL-separated, bytes.
+pub const SWAP_ARGS_LEN: usize = 1024;
 
 /// What the client asks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -21,24 +23,105 @@ pub enum ControlKind {
     Status = 1,
     /// Stop every process, clean the instance, end `agp up`.
     Down = 2,
+    /// Hot-swap the planner (`exec` and `args` of the request; empty: the same again).
+    SwapPlanner = 3,
+    /// From a planner started for a swap: it has its inputs and will drive at `epoch`.
+    Ready = 4,
+    /// From a swapped-in planner: its first command was applied, `value_ns` after its
+    /// `Ready` (the handover time).
+    Driving = 5,
 }
 
 impl ControlKind {
     pub fn from_u32(v: u32) -> Option<Self> {
-        [Self::Status, Self::Down]
-            .into_iter()
-            .find(|k| *k as u32 == v)
+        [
+            Self::Status,
+            Self::Down,
+            Self::SwapPlanner,
+            Self::Ready,
+            Self::Driving,
+        ]
+        .into_iter()
+        .find(|k| *k as u32 == v)
     }
 }
 
 /// A request to the supervisor.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("agp::ControlRequest.v1")]
 pub struct ControlRequest {
     /// A [`ControlKind`] as u32.
     pub kind: u32,
     pub _pad: u32,
+    /// [`ControlKind::Ready`], [`ControlKind::Driving`]: the planner's epoch.
+    pub epoch: u64,
+    /// [`ControlKind::Driving`]: the handover time; [`ControlKind::SwapPlanner`]: how
+    /// long the new planner may take to become ready and drive (0: the default).
+    pub value_ns: u64,
+    /// [`ControlKind::SwapPlanner`]: the process to swap (UTF-8, zero-padded).
+    pub name: [u8; STATUS_NAME_LEN],
+    /// [`ControlKind::SwapPlanner`]: the new planner's executable (UTF-8, zero-padded;
+    /// empty: the launch file's).
+    pub exec: [u8; STATUS_PATH_LEN],
+    /// [`ControlKind::SwapPlanner`]: its arguments, each ended by a NUL.
+    pub args: [u8; SWAP_ARGS_LEN],
+    /// 0 keeps the launch file's arguments; otherwise the number of arguments + 1.
+    pub args_set: u32,
+    pub _pad2: u32,
+}
+
+impl Default for ControlRequest {
+    fn default() -> Self {
+        Self {
+            kind: 0,
+            _pad: 0,
+            epoch: 0,
+            value_ns: 0,
+            name: [0; STATUS_NAME_LEN],
+            exec: [0; STATUS_PATH_LEN],
+            args: [0; SWAP_ARGS_LEN],
+            args_set: 0,
+            _pad2: 0,
+        }
+    }
+}
+
+impl ControlRequest {
+    pub fn new(kind: ControlKind) -> Self {
+        Self {
+            kind: kind as u32,
+            ..Self::default()
+        }
+    }
+
+    /// Stores `args` NUL-separated; `false` if they do not fit (or hold a NUL).
+    pub fn set_args(&mut self, args: &[String]) -> bool {
+        let total: usize = args.iter().map(|a| a.len() + 1).sum();
+        if total > SWAP_ARGS_LEN || args.iter().any(|a| a.contains('\0')) {
+            return false;
+        }
+        self.args.fill(0);
+        let mut at = 0;
+        for a in args {
+            self.args[at..at + a.len()].copy_from_slice(a.as_bytes());
+            at += a.len() + 1;
+        }
+        self.args_set = u32::try_from(args.len() + 1).unwrap_or(u32::MAX);
+        true
+    }
+
+    /// The arguments, if the request sets them.
+    pub fn get_args(&self) -> Option<Vec<String>> {
+        let n = (self.args_set as usize).checked_sub(1)?;
+        Some(
+            self.args
+                .split(|b| *b == 0)
+                .take(n)
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect(),
+        )
+    }
 }
 
 /// State of one process in a status reply.
@@ -85,6 +168,8 @@ pub struct ProcessStatus {
     pub _pad: u32,
     /// Since the current (or last) start; 0 when never started.
     pub uptime_ms: u64,
+    /// The planner epoch it runs at (`AGP_EPOCH`).
+    pub epoch: u64,
 }
 
 impl Default for ProcessStatus {
@@ -97,6 +182,7 @@ impl Default for ProcessStatus {
             restarts: 0,
             _pad: 0,
             uptime_ms: 0,
+            epoch: 0,
         }
     }
 }
@@ -114,6 +200,12 @@ pub struct ControlResponse {
     pub process_count: u32,
     /// Since `agp up` started.
     pub uptime_ms: u64,
+    /// The epoch of the planner that drives.
+    pub active_epoch: u64,
+    /// Swap: the new planner's ready -> its epoch active, ns (0 if not swapped).
+    pub handover_ns: u64,
+    /// Why a request was refused (UTF-8, zero-padded).
+    pub message: [u8; STATUS_PATH_LEN],
     pub processes: [ProcessStatus; MAX_STATUS_PROCESSES],
 }
 
@@ -125,17 +217,32 @@ impl Default for ControlResponse {
             supervisor_pid: 0,
             process_count: 0,
             uptime_ms: 0,
+            active_epoch: 0,
+            handover_ns: 0,
+            message: [0; STATUS_PATH_LEN],
             processes: [ProcessStatus::default(); MAX_STATUS_PROCESSES],
         }
     }
 }
 
 const _: () = {
-    assert!(core::mem::size_of::<ControlRequest>() == 8);
-    assert!(core::mem::size_of::<ProcessStatus>() == 312);
+    assert!(core::mem::size_of::<ControlRequest>() == 24 + 32 + 256 + 1024 + 8);
+    assert!(core::mem::size_of::<ActiveEpoch>() == 16);
+    assert!(core::mem::size_of::<ProcessStatus>() == 320);
     assert!(core::mem::align_of::<ProcessStatus>() == 8);
-    assert!(core::mem::size_of::<ControlResponse>() == 24 + 312 * MAX_STATUS_PROCESSES);
+    assert!(core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 320 * MAX_STATUS_PROCESSES);
 };
+
+/// Which planner drives: physics applies only motor commands of this epoch. Published by
+/// the supervisor (latched: a late subscriber gets it at once); the flip of a hot swap.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::ActiveEpoch.v1")]
+pub struct ActiveEpoch {
+    pub epoch: u64,
+    /// Bumped with every publication.
+    pub seq: u64,
+}
 
 /// Writes `s` into a zero-padded byte field, cut at a character boundary with `...` when
 /// it does not fit.
@@ -209,6 +316,82 @@ impl Instance {
     }
 }
 
+/// Why a request got no answer.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlAskError {
+    #[error("cannot create a control client: {0}")]
+    Client(String),
+    #[error("cannot send the request: {0}")]
+    Send(String),
+    #[error("cannot receive the answer: {0}")]
+    Receive(String),
+    #[error("the supervisor did not answer within {0:?}")]
+    Timeout(std::time::Duration),
+    #[error("shutdown requested")]
+    Shutdown,
+}
+
+/// A client of the supervisor's control service.
+pub struct ControlClient {
+    _service: ControlService,
+    client: iceoryx2::port::client::Client<ipc::Service, ControlRequest, (), ControlResponse, ()>,
+}
+
+impl ControlClient {
+    /// Opens the service, retrying for up to `wait` (a supervisor creates it a moment after
+    /// it takes its instance).
+    pub fn open(
+        instance: &Instance,
+        node: &Node<ipc::Service>,
+        wait: std::time::Duration,
+    ) -> Result<Self, ControlOpenError> {
+        let start = std::time::Instant::now();
+        let service = loop {
+            match instance.open_control(node) {
+                Ok(s) => break s,
+                Err(e) if start.elapsed() >= wait => return Err(e),
+                Err(_) => std::thread::sleep(std::time::Duration::from_millis(20)),
+            }
+        };
+        let client = service
+            .client_builder()
+            .create()
+            .map_err(|e| ControlOpenError::Create(format!("{e:?}")))?;
+        Ok(Self {
+            _service: service,
+            client,
+        })
+    }
+
+    /// Sends `request` and waits up to `timeout` for the answer.
+    pub fn ask(
+        &self,
+        request: &ControlRequest,
+        timeout: std::time::Duration,
+    ) -> Result<ControlResponse, ControlAskError> {
+        let pending = self
+            .client
+            .send_copy(*request)
+            .map_err(|e| ControlAskError::Send(format!("{e:?}")))?;
+        let start = std::time::Instant::now();
+        loop {
+            if let Some(response) = pending
+                .receive()
+                .map_err(|e| ControlAskError::Receive(format!("{e:?}")))?
+            {
+                return Ok(*response.payload());
+            }
+            if crate::wait::shutdown_requested() {
+                return Err(ControlAskError::Shutdown);
+            }
+            if start.elapsed() >= timeout {
+                return Err(ControlAskError::Timeout(timeout));
+            }
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,5 +405,22 @@ mod tests {
         assert_eq!(read_str(&f), "éé...");
         write_str(&mut f, "abcdefghij");
         assert_eq!(read_str(&f), "abcde...");
+    }
+}
+
+#[cfg(test)]
+mod request_tests {
+    use super::*;
+
+    #[test]
+    fn swap_arguments_round_trip_and_none_differs_from_empty() {
+        let mut r = ControlRequest::new(ControlKind::SwapPlanner);
+        assert_eq!(r.get_args(), None);
+        assert!(r.set_args(&[]));
+        assert_eq!(r.get_args(), Some(vec![]));
+        let args = vec!["--mode".to_owned(), "script".to_owned(), String::new()];
+        assert!(r.set_args(&args));
+        assert_eq!(r.get_args(), Some(args));
+        assert!(!r.set_args(&["x".repeat(SWAP_ARGS_LEN)]));
     }
 }

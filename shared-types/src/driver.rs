@@ -5,6 +5,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{Node, ipc};
 
+use crate::control::ActiveEpoch;
 use crate::instance::Instance;
 use crate::payloads::{GroundTruth, IrFrame, MotorCommand, Pose2, Reset};
 use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
@@ -21,6 +22,8 @@ pub enum DriveError {
     NoFrame { step: u64, timeout: Duration },
     #[error("shutdown requested")]
     Shutdown,
+    #[error("epoch {epoch} did not become active within {timeout:?}")]
+    NotActivated { epoch: u64, timeout: Duration },
     #[error("iceoryx2 {0}")]
     Port(String),
 }
@@ -38,6 +41,7 @@ pub struct LockstepDriver {
     commands: Publisher<ipc::Service, MotorCommand, ()>,
     resets: Publisher<ipc::Service, Reset, ()>,
     physics_inbox: Notifier<ipc::Service>,
+    epochs: Subscriber<ipc::Service, ActiveEpoch, ()>,
     waiter: Waiter,
     frame: IrFrame,
     last_truth: GroundTruth,
@@ -79,6 +83,13 @@ impl LockstepDriver {
         } else {
             None
         };
+        let epochs = instance
+            .active_epoch(&node)
+            .map_err(port("active epoch"))?
+            .data
+            .subscriber_builder()
+            .create()
+            .map_err(port("active epoch subscriber"))?;
         let listener = frames
             .event
             .listener_builder()
@@ -106,6 +117,7 @@ impl LockstepDriver {
                 .notifier_builder()
                 .create()
                 .map_err(port("physics inbox notifier"))?,
+            epochs,
             waiter: Waiter::new(listener, WaitStrategy::from_env()),
             frame: IrFrame::default(),
             last_truth: GroundTruth::default(),
@@ -116,6 +128,44 @@ impl LockstepDriver {
         };
         driver.frame = driver.wait_frame(|_| true, 0)?;
         Ok(driver)
+    }
+
+    /// The epoch this driver's commands carry.
+    pub fn epoch(&self) -> u64 {
+        self.epoch
+    }
+
+    /// For a planner started by a hot swap, after it told the supervisor it is ready:
+    /// waits until the supervisor made its epoch the active one, then takes the latest
+    /// frame, the one physics waits to get this planner's command for.
+    pub fn take_over(&mut self, timeout: Duration) -> Result<&IrFrame, DriveError> {
+        let start = std::time::Instant::now();
+        loop {
+            let mut active = None;
+            while let Ok(Some(e)) = self.epochs.receive() {
+                active = Some(e.epoch);
+            }
+            if active == Some(self.epoch) {
+                break;
+            }
+            if crate::wait::shutdown_requested() {
+                return Err(DriveError::Shutdown);
+            }
+            if start.elapsed() > timeout {
+                return Err(DriveError::NotActivated {
+                    epoch: self.epoch,
+                    timeout,
+                });
+            }
+            std::thread::sleep(Duration::from_micros(50));
+        }
+        let frames = &self.frames;
+        while let Ok(Some(f)) = frames.receive() {
+            if f.step >= self.frame.step {
+                self.frame = *f;
+            }
+        }
+        Ok(&self.frame)
     }
 
     /// The latest frame.
@@ -187,8 +237,9 @@ impl LockstepDriver {
             .map_err(|e| DriveError::Port(format!("send of a motor command: {e:?}")))?;
         let _ = self.physics_inbox.notify();
         let reset_seq = self.frame.reset_seq;
-        self.frame =
-            self.wait_frame(|f| f.step == step + 1 && f.reset_seq == reset_seq, step + 1)?;
+        // Normally the frame of the next step; after a hot swap's flip the frames may have
+        // moved on under the other planner: then the latest.
+        self.frame = self.wait_frame(|f| f.step > step && f.reset_seq == reset_seq, step + 1)?;
         Ok(&self.frame)
     }
 
@@ -203,7 +254,12 @@ impl LockstepDriver {
             .loan_uninit()
             .map_err(|e| DriveError::Port(format!("loan of a reset: {e:?}")))?;
         sample
-            .write_payload(Reset { seq, object, robot })
+            .write_payload(Reset {
+                seq,
+                object,
+                robot,
+                epoch: self.epoch,
+            })
             .send()
             .map_err(|e| DriveError::Port(format!("send of a reset: {e:?}")))?;
         let _ = self.physics_inbox.notify();

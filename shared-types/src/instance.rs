@@ -9,7 +9,8 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::payloads::{
-    GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
+    GradientGrid, GroundTruth, IrFrame, LearnEvent, LearnReport, MotorCommand, ObjectEstimate,
+    Reset, Task,
 };
 
 /// Longest instance name: root path plus prefix must stay under about 60 characters, since
@@ -59,6 +60,7 @@ impl ServiceNames {
     pub const ESTIMATES: &'static str = "agp/estimates";
     pub const GRIDS: &'static str = "agp/grids";
     pub const TASK: &'static str = "agp/task";
+    pub const ACTIVE_EPOCH: &'static str = "agp/active_epoch";
     /// The event service physics blocks on: notified after a motor command or a reset.
     pub const PHYSICS_INBOX: &'static str = "agp/physics_inbox.ev";
 
@@ -264,6 +266,70 @@ impl Instance {
     }
 }
 
+impl Instance {
+    /// The active planner epoch (published by the supervisor, read by physics; a change
+    /// wakes physics through its inbox).
+    pub fn active_epoch(
+        &self,
+        node: &Node<ipc::Service>,
+    ) -> Result<Topic<crate::control::ActiveEpoch>, OpenError> {
+        Topic::open(
+            node,
+            ServiceNames::ACTIVE_EPOCH,
+            ServiceNames::PHYSICS_INBOX,
+            Qos::epoch(),
+        )
+    }
+}
+
+impl ServiceNames {
+    /// Learning-protocol steps (planner to estimator) and test-push requests (benchmark to
+    /// planner). Its publishers notify [`ServiceNames::IR_FRAMES`]'s event service, so the
+    /// estimator, which waits for frames, wakes for both with one listener.
+    pub const LEARN_EVENTS: &'static str = "agp/learn_events";
+    /// The estimator's account of learning and its predictions of test pushes.
+    pub const LEARN_REPORTS: &'static str = "agp/learn_reports";
+}
+
+impl Instance {
+    /// Learning-protocol events; notifications go to the IR frames' event service.
+    pub fn learn_events(&self, node: &Node<ipc::Service>) -> Result<Topic<LearnEvent>, OpenError> {
+        Topic::open(
+            node,
+            ServiceNames::LEARN_EVENTS,
+            &ServiceNames::event_of(ServiceNames::IR_FRAMES),
+            Qos::learn(),
+        )
+    }
+
+    /// The estimator's learning reports, with an event service of their own.
+    pub fn learn_reports(
+        &self,
+        node: &Node<ipc::Service>,
+    ) -> Result<Topic<LearnReport>, OpenError> {
+        Topic::open(
+            node,
+            ServiceNames::LEARN_REPORTS,
+            &ServiceNames::event_of(ServiceNames::LEARN_REPORTS),
+            Qos::learn(),
+        )
+    }
+}
+
+impl Qos {
+    /// Learning events and reports: every one matters, none is state a late reader needs
+    /// (no history). The event service's limits match [`Qos::stream`]'s, since the events
+    /// share the IR frames' event service.
+    fn learn() -> Self {
+        Self {
+            history: 0,
+            buffer: 64,
+            max_publishers: 4,
+            max_subscribers: 8,
+        }
+    }
+}
+
 /// Files in `dir` whose name starts with `prefix`.
 pub fn instance_files_in(dir: &Path, prefix: &str) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -317,6 +383,16 @@ impl Qos {
             buffer: 15,
             max_publishers: 4,
             max_subscribers: 6,
+        }
+    }
+
+    /// The active epoch: latched, and sharing physics's inbox event with the commands
+    /// (an event service's limits must agree among its users).
+    fn epoch() -> Self {
+        Self {
+            history: 1,
+            buffer: 2,
+            ..Self::commands()
         }
     }
 

@@ -15,8 +15,9 @@ mod payloads;
 mod wait;
 
 pub use control::{
-    ControlKind, ControlOpenError, ControlRequest, ControlResponse, ControlService,
-    MAX_STATUS_PROCESSES, ProcessState, ProcessStatus, read_str, write_str,
+    ActiveEpoch, ControlAskError, ControlClient, ControlKind, ControlOpenError, ControlRequest,
+    ControlResponse, ControlService, MAX_STATUS_PROCESSES, ProcessState, ProcessStatus,
+    SWAP_ARGS_LEN, read_str, write_str,
 };
 pub use driver::{DriveError, LockstepDriver};
 pub use instance::{

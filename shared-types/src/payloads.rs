@@ -111,12 +111,15 @@ pub struct MotorCommand {
 /// robot's true pose. Applied by physics between two steps.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::Reset.v1")]
+#[type_name("agp::Reset.v2")]
 pub struct Reset {
     /// Chosen by the sender, echoed in [`IrFrame::reset_seq`] once applied.
     pub seq: u64,
     pub object: Pose2,
     pub robot: Pose2,
+    /// The sender's planner epoch: physics applies resets of the active epoch only, so a
+    /// planner being swapped out cannot move the world.
+    pub epoch: u64,
 }
 
 /// The true state of the world: for evaluation, the probe and the `oracle` planner only.
@@ -253,10 +256,177 @@ const _: () = {
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
     assert!(size_of::<IrFrame>() == 72 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
     assert!(size_of::<MotorCommand>() == 72 + 32 && align_of::<MotorCommand>() == 8);
-    assert!(size_of::<Reset>() == 56 && align_of::<Reset>() == 8);
+    assert!(size_of::<Reset>() == 64 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
     assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8);
     assert!(size_of::<GridHeader>() == 48 && align_of::<GridHeader>() == 8);
     assert!(size_of::<GradientGrid>() == 48 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
     assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
+};
+
+/// What a [`LearnEvent`] says. The planner sends the learning protocol's steps (in `learn`
+/// mode) to the estimator; a benchmark asks the planner for unseen test pushes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum LearnEventKind {
+    /// Planner: the shape circling starts, the object resting at `object` (odometry frame).
+    ShapeBegin = 0,
+    /// Planner: the shape circling closed its lap.
+    ShapeEnd = 1,
+    /// Planner: trial `index` at `alpha_deg` starts, the object put back at `object`.
+    TrialBegin = 2,
+    /// Planner: contact inferred from IR at the frame carried in the event.
+    Contact = 3,
+    /// Planner: the push ended at the carried frame; `flag` 1 if contact was made, 0 if the
+    /// approach gave up.
+    PushEnd = 4,
+    /// Planner: the trial's circling ended (`flag` 1 if its lap closed).
+    TrialEnd = 5,
+    /// Planner: every trial was run; the estimator publishes the gradients and saves them.
+    LearningDone = 6,
+    /// Benchmark: run unseen test push `index` from `angle_rad` round the object, at `alpha_deg`.
+    EvalRequest = 7,
+    /// Planner: test push `index` starts, the object put back at `object`.
+    EvalBegin = 8,
+    /// Planner: contact of the test push inferred from IR at the carried frame.
+    EvalContact = 9,
+    /// Planner: the test push ended and the object came to rest (`flag` 1 if contact was
+    /// made); the planner now waits for the next request.
+    EvalEnd = 10,
+    /// Benchmark: stop (the planner exits).
+    Stop = 11,
+}
+
+impl LearnEventKind {
+    pub const ALL: [LearnEventKind; 12] = [
+        Self::ShapeBegin,
+        Self::ShapeEnd,
+        Self::TrialBegin,
+        Self::Contact,
+        Self::PushEnd,
+        Self::TrialEnd,
+        Self::LearningDone,
+        Self::EvalRequest,
+        Self::EvalBegin,
+        Self::EvalContact,
+        Self::EvalEnd,
+        Self::Stop,
+    ];
+
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == v)
+    }
+}
+
+/// One step of the learning protocol, or a test-push request. An event about a frame
+/// carries what the estimator reads of it (IR sample, readings, odometry), so the reader
+/// needs not keep frames; the sender sends it before the command or reset that makes the
+/// next frame, so a reader that drains events before each frame sees them in order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::LearnEvent.v1")]
+pub struct LearnEvent {
+    /// Running count of the sender's events.
+    pub seq: u64,
+    /// A [`LearnEventKind`] as u32.
+    pub kind: u32,
+    /// Trial or test-push index.
+    pub index: u32,
+    /// Trials of the whole learning phase (for progress).
+    pub total: u32,
+    /// Kind-specific flag (see [`LearnEventKind`]).
+    pub flag: u32,
+    /// Step of the frame the event refers to.
+    pub step: u64,
+    /// The push direction's deviation from the centroid, degrees.
+    pub alpha_deg: f64,
+    /// Where the robot starts round the object (radians, object frame, 0 = +x).
+    pub angle_rad: f64,
+    /// The object's known pose at a begin event (odometry frame).
+    pub object: Pose2,
+    /// The frame's IR sample counter, readings and odometry.
+    pub ir_sample: u64,
+    pub ir_raw: [f32; IR_SENSOR_COUNT],
+    pub odometry: Pose2,
+}
+
+/// What a [`LearnReport`] says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum LearnReportKind {
+    /// The shape was learned from the circling (`value`: border points).
+    ShapeLearned = 0,
+    /// The shape circling gave no usable shape (fatal for the run).
+    ShapeFailed = 1,
+    /// Trial `index` was learned.
+    TrialLearned = 2,
+    /// Trial `index` taught nothing (no contact, a poor match).
+    TrialRejected = 3,
+    /// Learning ended: the gradient grids are published (`grids_seq`) and the AG file saved
+    /// (`valid` 1) or not (`valid` 0).
+    Learned = 4,
+    /// The prediction for test push `index`: `valid` 1 if the gradient had one.
+    EvalPrediction = 5,
+}
+
+impl LearnReportKind {
+    pub const ALL: [LearnReportKind; 6] = [
+        Self::ShapeLearned,
+        Self::ShapeFailed,
+        Self::TrialLearned,
+        Self::TrialRejected,
+        Self::Learned,
+        Self::EvalPrediction,
+    ];
+
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == v)
+    }
+}
+
+/// The estimator's account of the learning phase and its predictions of test pushes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::LearnReport.v1")]
+pub struct LearnReport {
+    /// Running count of reports.
+    pub seq: u64,
+    /// A [`LearnReportKind`] as u32.
+    pub kind: u32,
+    /// Trial or test-push index.
+    pub index: u32,
+    /// Trials learned and rejected so far, and planned.
+    pub trials_learned: u32,
+    pub trials_rejected: u32,
+    pub trials_total: u32,
+    /// Kind-specific flag (see [`LearnReportKind`]).
+    pub valid: u32,
+    /// Step of the event answered (a trial's end, a test push's end).
+    pub step: u64,
+    /// Step at which the trial's push ended.
+    pub push_end_step: u64,
+    pub alpha_deg: f64,
+    /// Contact point (object frame, m) the prediction is keyed by.
+    pub contact_point: [f64; 2],
+    /// Displacement of the centroid (object frame before the push, m): predicted for a test
+    /// push, estimated from the circling for a trial.
+    pub displacement: [f64; 2],
+    /// Rotation (rad, counter-clockwise positive), predicted or estimated likewise.
+    pub rotation_rad: f64,
+    /// The grids' sequence number once published.
+    pub grids_seq: u64,
+    /// Kind-specific value (see [`LearnReportKind`]).
+    pub value: f64,
+}
+
+const _: () = {
+    use core::mem::{align_of, size_of};
+    assert!(
+        size_of::<LearnEvent>() == 8 + 16 + 8 + 16 + 24 + 8 + 32 + 24
+            && align_of::<LearnEvent>() == 8
+    );
+    assert!(
+        size_of::<LearnReport>() == 8 + 24 + 16 + 8 + 16 + 16 + 8 + 8 + 8
+            && align_of::<LearnReport>() == 8
+    );
 };

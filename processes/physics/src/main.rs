@@ -5,8 +5,8 @@ use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
 use agp_shared_types::{
-    GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, WaitOutcome, WaitStrategy, Waiter,
-    install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
+    ActiveEpoch, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, WaitOutcome,
+    WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -55,6 +55,10 @@ struct Args {
     /// Lockstep: give up when no command arrives for this long (s); 0 waits forever.
     #[arg(long, default_value_t = 0)]
     idle_timeout_s: u64,
+    /// Lockstep: append `STEP EPOCH` for every applied motor command to this file (the
+    /// proof that a hot swap lost and repeated no step).
+    #[arg(long)]
+    step_log: Option<std::path::PathBuf>,
 }
 
 fn main() {
@@ -90,6 +94,16 @@ fn run() -> Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}"))?;
     let (ports, inbox) = Ports::open(&instance, &node)?;
     let waiter = Waiter::new(inbox, WaitStrategy::from_env());
+    let step_log = match &args.step_log {
+        Some(path) => Some(std::io::BufWriter::new(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(path)
+                .with_context(|| format!("cannot open the step log {}", path.display()))?,
+        )),
+        None => None,
+    };
 
     let mut runner = Runner {
         sim,
@@ -98,6 +112,7 @@ fn run() -> Result<()> {
         active_epoch: 0,
         trace_base: monotonic_ns(),
         rate_hz: args.rate_hz,
+        step_log,
     };
     match args.clock {
         Clock::Lockstep => runner.lockstep(&waiter, args.idle_timeout_s),
@@ -112,6 +127,7 @@ struct Ports {
     truth_ev: Notifier<ipc::Service>,
     commands: Subscriber<ipc::Service, MotorCommand, ()>,
     resets: Subscriber<ipc::Service, Reset, ()>,
+    epochs: Subscriber<ipc::Service, ActiveEpoch, ()>,
 }
 
 fn port_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -128,6 +144,7 @@ impl Ports {
         let truth = instance.ground_truth(node)?;
         let commands = instance.motor_commands(node)?;
         let resets = instance.resets(node)?;
+        let epochs = instance.active_epoch(node)?;
         let inbox = commands
             .event
             .listener_builder()
@@ -164,6 +181,11 @@ impl Ports {
                 .subscriber_builder()
                 .create()
                 .map_err(port_err("reset subscriber"))?,
+            epochs: epochs
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(port_err("active epoch subscriber"))?,
         };
         Ok((ports, inbox))
     }
@@ -176,6 +198,7 @@ struct Runner {
     active_epoch: u64,
     trace_base: u64,
     rate_hz: f64,
+    step_log: Option<std::io::BufWriter<std::fs::File>>,
 }
 
 fn pose2(p: Pose) -> Pose2 {
@@ -248,7 +271,11 @@ impl Runner {
             .receive()
             .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
         {
-            last = Some(*r);
+            // A reset of a planner that does not drive (one being swapped in or out) is
+            // dropped, as its motor commands are.
+            if r.epoch == self.active_epoch {
+                last = Some(*r);
+            }
         }
         if let Some(r) = last {
             self.sim.reset(pose(r.object), pose(r.robot));
@@ -267,12 +294,19 @@ impl Runner {
         self.publish(0, 0)?;
         loop {
             let step = self.sim.step_count();
-            let epoch = self.active_epoch;
+            let mut epoch = self.active_epoch;
+            // During a hot swap the next planner's command for this step can arrive before
+            // its epoch becomes active: kept here until the flip, or dropped.
+            let mut ahead: Option<(u64, f64, f64, u64)> = None;
             let mut reset = false;
             let outcome = {
                 let commands = &self.ports.commands;
                 let resets = &self.ports.resets;
+                let epochs = &self.ports.epochs;
                 waiter.wait_for(slice, || {
+                    while let Ok(Some(e)) = epochs.receive() {
+                        epoch = e.epoch;
+                    }
                     if resets.has_samples().unwrap_or(false) {
                         return Some(None);
                     }
@@ -281,12 +315,19 @@ impl Runner {
                             let received = monotonic_ns();
                             return Some(Some((c.left_mps, c.right_mps, received)));
                         }
-                        // A command of another step or epoch: stale, or from a planner that
-                        // is not active. Dropped.
+                        if c.step == step && c.epoch > epoch {
+                            ahead = Some((c.epoch, c.left_mps, c.right_mps, monotonic_ns()));
+                        }
+                        // Otherwise a command of another step or of a retired planner:
+                        // stale. Dropped.
                     }
-                    None
+                    match ahead {
+                        Some((e, l, r, received)) if e == epoch => Some(Some((l, r, received))),
+                        _ => None,
+                    }
                 })
             };
+            self.active_epoch = epoch;
             match outcome {
                 WaitOutcome::Shutdown => return Ok(()),
                 WaitOutcome::TimedOut => {
@@ -302,6 +343,11 @@ impl Runner {
                 }
                 WaitOutcome::Ready(Some((l, r, received))) => {
                     idle_since = Instant::now();
+                    if let Some(log) = &mut self.step_log {
+                        use std::io::Write;
+                        writeln!(log, "{step} {}", self.active_epoch)
+                            .context("cannot write the step log")?;
+                    }
                     self.sim.step(l, r);
                     self.publish(monotonic_ns(), received)?;
                 }
@@ -335,6 +381,14 @@ impl Runner {
         while !shutdown_requested() {
             if self.apply_resets()? {
                 wheels = (0.0, 0.0);
+            }
+            while let Some(e) = self
+                .ports
+                .epochs
+                .receive()
+                .map_err(|e| anyhow::anyhow!("cannot receive the active epoch: {e:?}"))?
+            {
+                self.active_epoch = e.epoch;
             }
             let mut received = 0;
             while let Some(c) = self

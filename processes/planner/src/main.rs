@@ -3,7 +3,10 @@
 use std::time::Duration;
 
 use agp_planner::{ContactSense, PushPhase, PushRoutine, PushSettings};
-use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2, install_shutdown_handler};
+use agp_shared_types::{
+    ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver, Pose2,
+    install_shutdown_handler, monotonic_ns, stage,
+};
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
@@ -41,7 +44,60 @@ struct Args {
     /// Push duration after contact, milliseconds.
     #[arg(long, default_value_t = 2000)]
     push_ms: u64,
+    /// The epoch this planner drives at. 0: from the start. Set by the supervisor for a hot
+    /// swap: the planner then tells it when it is ready, waits for its epoch to become
+    /// active, and reports its first applied command.
+    #[arg(long, env = "AGP_EPOCH", default_value_t = 0)]
+    epoch: u64,
 }
+
+/// The planner's half of a hot swap (pipeline.md, "Hot-swapping the planner").
+struct SwapIn {
+    client: ControlClient,
+    _node: iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    epoch: u64,
+    ready_ns: u64,
+}
+
+impl SwapIn {
+    /// Tells the supervisor this planner is ready, then waits until its epoch drives.
+    fn start(instance: &Instance, driver: &mut LockstepDriver) -> Result<Option<Self>> {
+        let epoch = driver.epoch();
+        if epoch == 0 {
+            return Ok(None);
+        }
+        let node = instance
+            .node(&format!("planner-swap-{epoch}"), false)
+            .map_err(|e| anyhow::anyhow!("cannot create the swap node: {e:?}"))?;
+        let client = ControlClient::open(instance, &node, TIMEOUT)
+            .context("cannot reach the supervisor for the swap")?;
+        let ready_ns = monotonic_ns();
+        let mut request = ControlRequest::new(ControlKind::Ready);
+        request.epoch = epoch;
+        // A restart of a swapped-in planner finds its epoch active already: the supervisor
+        // then refuses the `Ready`, and `take_over` returns at once.
+        client.ask(&request, TIMEOUT)?;
+        driver.take_over(TIMEOUT)?;
+        Ok(Some(Self {
+            client,
+            _node: node,
+            epoch,
+            ready_ns,
+        }))
+    }
+
+    /// Reports the handover (ready -> first command applied) from the first frame after it.
+    fn driving(self, applied_ns: u64) -> Result<()> {
+        let mut request = ControlRequest::new(ControlKind::Driving);
+        request.epoch = self.epoch;
+        request.value_ns = applied_ns.saturating_sub(self.ready_ns);
+        self.client.ask(&request, TIMEOUT)?;
+        Ok(())
+    }
+}
+
+/// Safety net of the waits on other processes.
+const TIMEOUT: Duration = Duration::from_secs(30);
 
 fn main() {
     if let Err(e) = run() {
@@ -72,12 +128,20 @@ fn run() -> Result<()> {
 fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
     let robot = RobotDescription::epuck();
     let sense = ContactSense::new(&robot);
-    let mut driver =
-        match LockstepDriver::connect(instance, "planner", 0, false, Duration::from_secs(30)) {
-            Ok(d) => d,
-            Err(DriveError::Shutdown) => return Ok(()),
-            Err(e) => return Err(e).context("cannot reach physics"),
-        };
+    let mut driver = match LockstepDriver::connect(instance, "planner", args.epoch, false, TIMEOUT)
+    {
+        Ok(d) => d,
+        Err(DriveError::Shutdown) => return Ok(()),
+        Err(e) => return Err(e).context("cannot reach physics"),
+    };
+    let mut swap_in = match SwapIn::start(instance, &mut driver) {
+        Ok(s) => s,
+        Err(e) if agp_shared_types::shutdown_requested() => {
+            let _ = e;
+            return Ok(());
+        }
+        Err(e) => return Err(e),
+    };
     let settings = PushSettings {
         push_duration: args.push_ms as f64 * 1e-3,
         ..PushSettings::default()
@@ -126,7 +190,11 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
             }
             let (l, r) = routine.update(&sense, f.sim_time_s, f.ir_sample, &f.ir_raw);
             match driver.step(l, r) {
-                Ok(_) => {}
+                Ok(next) => {
+                    if let Some(s) = swap_in.take() {
+                        s.driving(next.timing.stamps_ns[stage::COMMAND_APPLIED])?;
+                    }
+                }
                 Err(DriveError::Shutdown) => return Ok(()),
                 Err(e) => return Err(e.into()),
             }

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{
-    ControlKind, ControlRequest, ControlResponse, Instance, ProcessState, read_str,
+    ControlClient, ControlKind, ControlRequest, ControlResponse, Instance, ProcessState, read_str,
 };
 use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
@@ -56,6 +56,11 @@ pub fn is_up(instance: &Instance) -> bool {
 
 /// Sends one request to the instance's supervisor and returns its answer.
 pub fn ask(name: &str, kind: ControlKind) -> Result<ControlResponse> {
+    ask_with(name, ControlRequest::new(kind), ANSWER_TIMEOUT)
+}
+
+/// Sends `request` and waits up to `timeout` for the answer.
+pub fn ask_with(name: &str, request: ControlRequest, timeout: Duration) -> Result<ControlResponse> {
     let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
     if !is_up(&instance) {
         bail!("instance `{name}` is not up (no supervisor holds it)");
@@ -63,37 +68,8 @@ pub fn ask(name: &str, kind: ControlKind) -> Result<ControlResponse> {
     let node = instance
         .node(&format!("agp-cli-{}", std::process::id()), false)
         .map_err(|e| anyhow!("cannot create an iceoryx2 node on instance `{name}`: {e:?}"))?;
-    // A supervisor that just took the lock creates its service a moment later.
-    let deadline = Instant::now() + ANSWER_TIMEOUT;
-    let service = loop {
-        match instance.open_control(&node) {
-            Ok(s) => break s,
-            Err(e) if Instant::now() >= deadline || !is_up(&instance) => return Err(e.into()),
-            Err(_) => std::thread::sleep(Duration::from_millis(20)),
-        }
-    };
-    let client = service
-        .client_builder()
-        .create()
-        .map_err(|e| anyhow!("cannot create a control client: {e:?}"))?;
-    let pending = client
-        .send_copy(ControlRequest {
-            kind: kind as u32,
-            _pad: 0,
-        })
-        .map_err(|e| anyhow!("cannot send the request: {e:?}"))?;
-    loop {
-        if let Some(response) = pending
-            .receive()
-            .map_err(|e| anyhow!("cannot receive the answer: {e:?}"))?
-        {
-            return Ok(*response.payload());
-        }
-        if Instant::now() >= deadline {
-            bail!("the supervisor of instance `{name}` did not answer within {ANSWER_TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let client = ControlClient::open(&instance, &node, ANSWER_TIMEOUT)?;
+    Ok(client.ask(&request, timeout)?)
 }
 
 /// One process of `agp status --json`.

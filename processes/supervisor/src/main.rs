@@ -1,6 +1,7 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
 mod control;
+mod control_plane;
 mod instance_lock;
 mod probe;
 mod signals;
@@ -31,6 +32,14 @@ enum Cmd {
     Status(StatusArgs),
     /// Stop a running instance: every process, then every file of it.
     Down(DownArgs),
+    /// Hot-swap a process of a running instance, make before break: the new one starts
+    /// beside the old, takes the latest state, and drives only once it is ready; the old
+    /// one stops after the new one's first command was applied. A new process that fails
+    /// to start, to become ready or to drive in time is killed and the old one drives on.
+    ///
+    /// The process must speak the swap protocol (`AGP_EPOCH`, `Ready`, `Driving`), as
+    /// `agp-planner` does. Example: agp swap planner --exec target/debug/agp-planner
+    Swap(SwapArgs),
     /// Measure what the simulated world does.
     Probe {
         #[command(subcommand)]
@@ -67,6 +76,30 @@ struct StatusArgs {
 }
 
 #[derive(Debug, clap::Args)]
+struct SwapArgs {
+    /// The process of the launch file to swap.
+    process: String,
+    /// The new executable (default: the one running now).
+    #[arg(long)]
+    exec: Option<PathBuf>,
+    /// Seconds the new process may take to become ready, and then to drive.
+    #[arg(long, default_value_t = 10.0)]
+    timeout_s: f64,
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    launch: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+    /// The new process's arguments (default: the ones running now).
+    #[arg(last = true)]
+    args: Option<Vec<String>>,
+}
+
+#[derive(Debug, clap::Args)]
 struct DownArgs {
     /// The instance (default: the one of LAUNCH).
     #[arg(long)]
@@ -100,6 +133,7 @@ fn main() -> ExitCode {
         Cmd::Up(args) => up(args),
         Cmd::Status(args) => status(args),
         Cmd::Down(args) => down(args),
+        Cmd::Swap(args) => swap(args),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {
@@ -227,6 +261,83 @@ fn status(args: &StatusArgs) -> Result<u8> {
         );
     } else {
         report.print();
+    }
+    Ok(0)
+}
+
+fn swap(args: &SwapArgs) -> Result<u8> {
+    use agp_shared_types::{ControlKind, ControlRequest, read_str, write_str};
+    if !(args.timeout_s.is_finite() && args.timeout_s > 0.0 && args.timeout_s <= 3600.0) {
+        anyhow::bail!(
+            "--timeout-s must be between 0 and 3600 seconds, got {}",
+            args.timeout_s
+        );
+    }
+    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let mut request = ControlRequest::new(ControlKind::SwapPlanner);
+    if args.process.len() > request.name.len() {
+        anyhow::bail!("no process is named `{}`", args.process);
+    }
+    write_str(&mut request.name, &args.process);
+    if let Some(exec) = &args.exec {
+        let exec = std::fs::canonicalize(exec)
+            .with_context(|| format!("--exec {}: no such file", exec.display()))?;
+        let text = exec.to_string_lossy();
+        if text.len() > request.exec.len() {
+            anyhow::bail!(
+                "--exec {text}: the path is longer than {} bytes",
+                request.exec.len()
+            );
+        }
+        write_str(&mut request.exec, &text);
+    }
+    if let Some(a) = &args.args
+        && !request.set_args(a)
+    {
+        anyhow::bail!(
+            "the arguments do not fit in {} bytes",
+            agp_shared_types::SWAP_ARGS_LEN
+        );
+    }
+    let timeout = std::time::Duration::from_secs_f64(args.timeout_s);
+    request.value_ns = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+    // The answer comes when the swap ends: ready, then driving, each within the timeout.
+    let r = control::ask_with(
+        &name,
+        request,
+        timeout * 2 + std::time::Duration::from_secs(5),
+    )?;
+    if r.ok == 0 {
+        anyhow::bail!(
+            "swap of `{}` refused: {}",
+            args.process,
+            read_str(&r.message)
+        );
+    }
+    let report = control::StatusReport::new(&name, &r);
+    let entry = report.processes.iter().find(|p| p.name == args.process);
+    let pid = entry.and_then(|p| p.pid);
+    let handover_us = r.handover_ns as f64 * 1e-3;
+    if args.json {
+        let v = serde_json::json!({
+            "instance": name,
+            "process": args.process,
+            "pid": pid,
+            "epoch": r.active_epoch,
+            "handover_us": handover_us,
+            "exec": entry.map(|p| p.exec.clone()),
+        });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&v).context("cannot encode JSON")?
+        );
+    } else {
+        println!(
+            "agp: swapped `{}` of instance `{name}`: pid {}, epoch {}, handover {handover_us:.1} us (ready -> first command applied)",
+            args.process,
+            pid.map_or("-".to_owned(), |p| p.to_string()),
+            r.active_epoch
+        );
     }
     Ok(0)
 }

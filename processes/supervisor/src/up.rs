@@ -2,25 +2,27 @@
 //! processes, and the removal of every file it leaves.
 
 use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{
-    ControlKind, ControlRequest, ControlResponse, GradientGrid, GroundTruth, Instance, IrFrame,
-    MAX_STATUS_PROCESSES, MotorCommand, ObjectEstimate, ProcessState, Reset, Task, Topic,
-    write_str,
+    GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
 };
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
 use iceoryx2::node::{NodeState, NodeView};
-use iceoryx2::port::server::Server;
 use iceoryx2::prelude::{CallbackProgression, Node, ipc};
 
+use crate::control_plane::ControlPlane;
 use crate::instance_lock::InstanceLock;
 use crate::signals;
 
 /// How often the supervisor looks at its children and its signal flags.
 const POLL: Duration = Duration::from_millis(10);
+
+/// The same while a hot swap is under way.
+const SWAP_POLL: Duration = Duration::from_micros(200);
 
 /// How long leftover nodes of a previous run may take to die (their supervisor just died
 /// and the kernel is killing them) before `up` refuses to clean their files.
@@ -28,7 +30,7 @@ const LEFTOVER_DEATH_WAIT: Duration = Duration::from_secs(3);
 
 /// Why a run ended.
 #[derive(Debug)]
-enum RunEnd {
+pub(crate) enum RunEnd {
     /// A process marked `ends_run` exited with status 0.
     Finished { process: String },
     /// The supervisor got a stop signal.
@@ -52,19 +54,19 @@ impl RunEnd {
 }
 
 /// Prints one status line per event, stamped with the time since `up` started.
-struct Log {
-    start: Instant,
+pub(crate) struct Log {
+    pub(crate) start: Instant,
 }
 
 impl Log {
-    fn event(&self, process: &str, what: std::fmt::Arguments<'_>) {
+    pub(crate) fn event(&self, process: &str, what: std::fmt::Arguments<'_>) {
         println!(
             "[{:8.3} s] {process}: {what}",
             self.start.elapsed().as_secs_f64()
         );
     }
 
-    fn note(&self, what: std::fmt::Arguments<'_>) {
+    pub(crate) fn note(&self, what: std::fmt::Arguments<'_>) {
         println!("[{:8.3} s] {what}", self.start.elapsed().as_secs_f64());
     }
 }
@@ -95,7 +97,7 @@ impl Services {
     }
 }
 
-enum SlotState {
+pub(crate) enum SlotState {
     Running(Child),
     /// Waiting for its backoff before restart number `nth`.
     Pending {
@@ -106,16 +108,27 @@ enum SlotState {
 }
 
 /// One `[[process]]` of the launch file and what became of it.
-struct Slot<'a> {
-    process: &'a ProcessConfig,
-    state: SlotState,
-    restarts: u32,
+pub(crate) struct Slot<'a> {
+    pub(crate) process: &'a ProcessConfig,
+    pub(crate) state: SlotState,
+    pub(crate) restarts: u32,
     /// When it was last started.
-    started: Option<Instant>,
+    pub(crate) started: Option<Instant>,
+    /// The planner epoch it runs at (`AGP_EPOCH`): 0 unless swapped in.
+    pub(crate) epoch: u64,
+    /// Executable and arguments a hot swap put in place of the launch file's.
+    pub(crate) exec_override: Option<(PathBuf, Vec<String>)>,
 }
 
-/// The server of the instance's control service, answering `agp status` and `agp down`.
-type ControlServer = Server<ipc::Service, ControlRequest, (), ControlResponse, ()>;
+impl Slot<'_> {
+    /// The executable and arguments it runs with.
+    pub(crate) fn command(&self) -> (PathBuf, Vec<String>) {
+        match &self.exec_override {
+            Some((exec, args)) => (exec.clone(), args.clone()),
+            None => (self.process.exec.clone(), self.process.args.clone()),
+        }
+    }
+}
 
 /// Runs `config` until it ends; returns the exit status of `agp up`. Errors are for what
 /// happens before any child starts (lock, leftovers, services).
@@ -165,19 +178,13 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         }
     };
 
-    let control = instance.create_control(&node).and_then(|c| {
-        c.server_builder()
-            .create()
-            .map_err(|e| agp_shared_types::ControlOpenError::Create(format!("{e:?}")))
-            .map(|server| (c, server))
-    });
-    let (control, server) = match control {
+    let mut control = match ControlPlane::open(&instance, &node) {
         Ok(c) => c,
         Err(e) => {
             drop(services);
             drop(node);
             let _ = instance.remove_files();
-            return Err(anyhow!(e).context(format!(
+            return Err(e.context(format!(
                 "cannot create the control service of instance `{}`",
                 config.instance
             )));
@@ -192,13 +199,15 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             state: SlotState::Done,
             restarts: 0,
             started: None,
+            epoch: 0,
+            exec_override: None,
         })
         .collect();
-    let end = run(config, &mut slots, &node, &server, &log);
+    let end = run(config, &mut slots, &node, &mut control, &log);
+    control.shutdown(&slots, &log);
 
     stop_all(&mut slots, &log);
     node.try_cleanup_dead_nodes();
-    drop(server);
     drop(control);
     drop(services);
     drop(node);
@@ -302,14 +311,14 @@ fn run(
     config: &LaunchConfig,
     slots: &mut [Slot<'_>],
     node: &Node<ipc::Service>,
-    server: &ControlServer,
+    control: &mut ControlPlane,
     log: &Log,
 ) -> RunEnd {
     for slot in slots.iter_mut() {
         if let Some(s) = signals::first() {
             return RunEnd::Signal(s);
         }
-        if let Err(end) = slot.start(config, log, None) {
+        if let Err(end) = slot.start(config, log, None, 0) {
             return end;
         }
     }
@@ -319,24 +328,33 @@ fn run(
         }
         let now = Instant::now();
         for slot in slots.iter_mut() {
-            if let Some(end) = slot.poll(config, node, log, now) {
+            if let Some(end) = slot.poll(config, node, log, now, control.active_epoch()) {
                 return end;
             }
         }
         if slots.iter().all(|s| matches!(s.state, SlotState::Done)) {
             return RunEnd::AllExited;
         }
-        if let Some(end) = serve(server, slots, log) {
+        if let Some(end) = control.serve(config, slots, log) {
             return end;
         }
-        std::thread::sleep(POLL);
+        control.poll(slots, log);
+        // A swap's handover waits on this loop: look more often while one is under way.
+        std::thread::sleep(if control.swapping() { SWAP_POLL } else { POLL });
     }
 }
 
 impl Slot<'_> {
     /// Spawns the process; `nth` is the restart number, if this is a restart.
-    fn start(&mut self, config: &LaunchConfig, log: &Log, nth: Option<u32>) -> Result<(), RunEnd> {
-        match spawn(config, self.process) {
+    fn start(
+        &mut self,
+        config: &LaunchConfig,
+        log: &Log,
+        nth: Option<u32>,
+        epoch: u64,
+    ) -> Result<(), RunEnd> {
+        let (exec, args) = self.command();
+        match spawn_process(config, self.process, &exec, &args, epoch) {
             Ok(child) => {
                 let pid = child.id();
                 match nth {
@@ -351,16 +369,14 @@ impl Slot<'_> {
                 }
                 self.state = SlotState::Running(child);
                 self.started = Some(Instant::now());
+                self.epoch = epoch;
                 Ok(())
             }
             Err(e) => {
                 self.state = SlotState::Done;
                 Err(RunEnd::Failed {
                     process: self.process.name.clone(),
-                    why: format!(
-                        "could not be started from {}: {e}",
-                        self.process.exec.display()
-                    ),
+                    why: format!("could not be started from {}: {e}", exec.display()),
                 })
             }
         }
@@ -373,6 +389,7 @@ impl Slot<'_> {
         node: &Node<ipc::Service>,
         log: &Log,
         now: Instant,
+        active_epoch: u64,
     ) -> Option<RunEnd> {
         let process = self.process;
         let name = &process.name;
@@ -429,74 +446,31 @@ impl Slot<'_> {
             SlotState::Pending { at, nth } if now >= *at => {
                 let nth = *nth;
                 self.restarts = nth;
-                self.start(config, log, Some(nth)).err()
+                // A restart drives at once: it gets the active epoch (if it is the planner
+                // that drives, the one it had).
+                self.start(config, log, Some(nth), active_epoch.max(self.epoch))
+                    .err()
             }
             SlotState::Pending { .. } | SlotState::Done => None,
         }
     }
 }
 
-/// Answers every pending control request; `Some` when one ends the run.
-fn serve(server: &ControlServer, slots: &[Slot<'_>], log: &Log) -> Option<RunEnd> {
-    let mut end = None;
-    loop {
-        let request = match server.receive() {
-            Ok(Some(r)) => r,
-            Ok(None) => return end,
-            Err(e) => {
-                log.note(format_args!("control service: cannot receive: {e:?}"));
-                return end;
-            }
-        };
-        let kind = ControlKind::from_u32(request.payload().kind);
-        let mut response = ControlResponse {
-            kind: request.payload().kind,
-            ok: u32::from(kind.is_some()),
-            supervisor_pid: std::process::id(),
-            uptime_ms: u64::try_from(log.start.elapsed().as_millis()).unwrap_or(u64::MAX),
-            ..ControlResponse::default()
-        };
-        if kind == Some(ControlKind::Down) {
-            log.note(format_args!("`agp down` received"));
-            end = Some(RunEnd::Down);
-        }
-        fill_status(slots, &mut response);
-        if let Err(e) = request.send_copy(response) {
-            log.note(format_args!("control service: cannot answer: {e:?}"));
-        }
-    }
-}
-
-/// Each process's state into a status reply.
-fn fill_status(slots: &[Slot<'_>], out: &mut ControlResponse) {
-    let now = Instant::now();
-    out.process_count = u32::try_from(slots.len().min(MAX_STATUS_PROCESSES)).unwrap_or(0);
-    for (slot, p) in slots.iter().zip(out.processes.iter_mut()) {
-        write_str(&mut p.name, &slot.process.name);
-        write_str(&mut p.exec, &slot.process.exec.to_string_lossy());
-        p.restarts = slot.restarts;
-        p.uptime_ms = slot.started.map_or(0, |t| {
-            u64::try_from((now - t).as_millis()).unwrap_or(u64::MAX)
-        });
-        let (state, pid) = match &slot.state {
-            SlotState::Running(child) => (ProcessState::Running, child.id()),
-            SlotState::Pending { .. } => (ProcessState::Pending, 0),
-            SlotState::Done if slot.started.is_none() => (ProcessState::Pending, 0),
-            SlotState::Done => (ProcessState::Exited, 0),
-        };
-        p.state = state as u32;
-        p.pid = pid;
-    }
-}
-
 /// Starts one process with its context in the environment, in a process group of its own
 /// (a Ctrl-C at the terminal reaches only the supervisor, which then stops it), killed by
 /// the kernel if the supervisor dies.
-fn spawn(config: &LaunchConfig, process: &ProcessConfig) -> std::io::Result<Child> {
-    let mut cmd = Command::new(&process.exec);
-    cmd.args(&process.args)
+pub(crate) fn spawn_process(
+    config: &LaunchConfig,
+    process: &ProcessConfig,
+    exec: &std::path::Path,
+    args: &[String],
+    epoch: u64,
+) -> std::io::Result<Child> {
+    let mut cmd = Command::new(exec);
+    cmd.args(args)
         .envs(&process.env)
         .envs(config.context_env(process))
+        .env("AGP_EPOCH", epoch.to_string())
         .stdin(Stdio::null());
     spawn_guarded(&mut cmd)
 }
@@ -522,7 +496,7 @@ pub(crate) fn spawn_guarded(cmd: &mut Command) -> std::io::Result<Child> {
 }
 
 /// How a process ended, for status lines.
-fn describe(status: ExitStatus) -> String {
+pub(crate) fn describe(status: ExitStatus) -> String {
     match (status.code(), status.signal()) {
         (Some(code), _) => format!("exited with status {code}"),
         (None, Some(sig)) => format!("was killed by {}", signals::name(sig)),

@@ -1,0 +1,443 @@
+//! The supervisor's side of the control service: answers `agp status` and `agp down`, and
+//! runs hot swaps make-before-break (pipeline.md, "Hot-swapping the planner"):
+//!
+//! 1. `agp swap NAME` arrives: the new process starts with the next epoch in `AGP_EPOCH`;
+//! 2. it opens its ports, takes the latest state from history and sends `Ready`;
+//! 3. the supervisor publishes the new active epoch (one sample; physics applies motor
+//!    commands and resets of the active epoch only, so the two never both drive);
+//! 4. the new process sends `Driving` once its first command was applied; only then is the
+//!    old one stopped (SIGTERM, grace, SIGKILL) and the swap answered.
+//!
+//! A new process that exits or misses its deadline before step 4 is killed, the old epoch
+//! is published again, and the old process, which never stopped, drives on.
+
+use std::path::PathBuf;
+use std::process::Child;
+use std::time::{Duration, Instant};
+
+use agp_shared_types::{
+    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
+    MAX_STATUS_PROCESSES, ProcessState, Topic, read_str, write_str,
+};
+use anyhow::{Result, anyhow};
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::server::Server;
+use iceoryx2::prelude::{Node, ipc};
+
+use agp_supervisor::LaunchConfig;
+
+use crate::up::{Log, RunEnd, Slot, SlotState, describe, signal_group, spawn_process};
+
+/// How long a swapped-in process may take to become ready, and then to drive, unless the
+/// request says otherwise.
+const DEFAULT_SWAP_TIMEOUT: Duration = Duration::from_secs(10);
+
+type Request = ActiveRequest<ipc::Service, ControlRequest, (), ControlResponse, ()>;
+
+enum SwapPhase {
+    /// Started; waiting for its `Ready`.
+    Starting,
+    /// Its epoch is active; waiting for its `Driving`.
+    Flipped,
+}
+
+/// A hot swap under way.
+struct Swap {
+    /// The `agp swap` request, answered when the swap ends.
+    request: Request,
+    slot: usize,
+    child: Child,
+    epoch: u64,
+    exec: PathBuf,
+    args: Vec<String>,
+    phase: SwapPhase,
+    deadline: Instant,
+    timeout: Duration,
+}
+
+/// A swapped-out process on its way out.
+struct Retiring {
+    name: String,
+    child: Child,
+    kill_at: Instant,
+    killed: bool,
+}
+
+/// The control service, the active epoch and the swaps of one run.
+pub(crate) struct ControlPlane {
+    server: Server<ipc::Service, ControlRequest, (), ControlResponse, ()>,
+    _service: ControlService,
+    epochs: Publisher<ipc::Service, ActiveEpoch, ()>,
+    physics_inbox: Notifier<ipc::Service>,
+    _epoch_topic: Topic<ActiveEpoch>,
+    active_epoch: u64,
+    next_epoch: u64,
+    seq: u64,
+    swap: Option<Swap>,
+    retiring: Vec<Retiring>,
+}
+
+fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
+    move |e| anyhow!("cannot create the {what}: {e:?}")
+}
+
+impl ControlPlane {
+    /// Creates the control service and publishes epoch 0 (the launch file's processes).
+    pub(crate) fn open(instance: &Instance, node: &Node<ipc::Service>) -> Result<Self> {
+        let service = instance.create_control(node)?;
+        let server = service
+            .server_builder()
+            .create()
+            .map_err(err("control server"))?;
+        let topic = instance.active_epoch(node)?;
+        let epochs = topic
+            .data
+            .publisher_builder()
+            .create()
+            .map_err(err("active epoch publisher"))?;
+        let physics_inbox = topic
+            .event
+            .notifier_builder()
+            .create()
+            .map_err(err("physics inbox notifier"))?;
+        let mut plane = Self {
+            server,
+            _service: service,
+            epochs,
+            physics_inbox,
+            _epoch_topic: topic,
+            active_epoch: 0,
+            next_epoch: 1,
+            seq: 0,
+            swap: None,
+            retiring: Vec::new(),
+        };
+        plane.publish_epoch(0)?;
+        Ok(plane)
+    }
+
+    /// Whether a hot swap is under way.
+    pub(crate) fn swapping(&self) -> bool {
+        self.swap.is_some()
+    }
+
+    /// The epoch whose commands physics applies.
+    pub(crate) fn active_epoch(&self) -> u64 {
+        self.active_epoch
+    }
+
+    fn publish_epoch(&mut self, epoch: u64) -> Result<()> {
+        self.seq += 1;
+        let sample = self
+            .epochs
+            .loan_uninit()
+            .map_err(|e| anyhow!("cannot loan an active epoch sample: {e:?}"))?;
+        sample
+            .write_payload(ActiveEpoch {
+                epoch,
+                seq: self.seq,
+            })
+            .send()
+            .map_err(|e| anyhow!("cannot publish the active epoch: {e:?}"))?;
+        let _ = self.physics_inbox.notify();
+        self.active_epoch = epoch;
+        Ok(())
+    }
+
+    /// Answers every pending request; `Some` when one ends the run.
+    pub(crate) fn serve(
+        &mut self,
+        config: &LaunchConfig,
+        slots: &mut [Slot<'_>],
+        log: &Log,
+    ) -> Option<RunEnd> {
+        let mut end = None;
+        loop {
+            let request = match self.server.receive() {
+                Ok(Some(r)) => r,
+                Ok(None) => return end,
+                Err(e) => {
+                    log.note(format_args!("control service: cannot receive: {e:?}"));
+                    return end;
+                }
+            };
+            let payload = *request.payload();
+            match ControlKind::from_u32(payload.kind) {
+                Some(ControlKind::Status) => {
+                    self.answer(&request, slots, log, Ok(0));
+                }
+                Some(ControlKind::Down) => {
+                    log.note(format_args!("`agp down` received"));
+                    end = Some(RunEnd::Down);
+                    self.answer(&request, slots, log, Ok(0));
+                }
+                Some(ControlKind::SwapPlanner) => {
+                    if let Err(why) = self.start_swap(config, request, &payload, slots, log) {
+                        // `start_swap` hands the request back only when it refused.
+                        let (request, why) = *why;
+                        self.answer(&request, slots, log, Err(why));
+                    }
+                }
+                Some(ControlKind::Ready) => {
+                    let result = self.on_ready(payload.epoch, log);
+                    self.answer(&request, slots, log, result.map(|()| 0));
+                }
+                Some(ControlKind::Driving) => {
+                    let result = self.on_driving(payload.epoch, payload.value_ns, slots, log);
+                    self.answer(&request, slots, log, result.map(|()| 0));
+                }
+                None => {
+                    let why = format!("unknown request kind {}", payload.kind);
+                    self.answer(&request, slots, log, Err(why));
+                }
+            }
+        }
+    }
+
+    fn answer(
+        &self,
+        request: &Request,
+        slots: &[Slot<'_>],
+        log: &Log,
+        result: Result<u64, String>,
+    ) {
+        let mut response = ControlResponse {
+            kind: request.payload().kind,
+            ok: u32::from(result.is_ok()),
+            supervisor_pid: std::process::id(),
+            uptime_ms: u64::try_from(log.start.elapsed().as_millis()).unwrap_or(u64::MAX),
+            active_epoch: self.active_epoch,
+            handover_ns: *result.as_ref().unwrap_or(&0),
+            ..ControlResponse::default()
+        };
+        if let Err(why) = &result {
+            write_str(&mut response.message, why);
+        }
+        fill_status(slots, &mut response);
+        if let Err(e) = request.send_copy(response) {
+            log.note(format_args!("control service: cannot answer: {e:?}"));
+        }
+    }
+
+    #[allow(clippy::result_large_err)]
+    fn start_swap(
+        &mut self,
+        config: &LaunchConfig,
+        request: Request,
+        payload: &ControlRequest,
+        slots: &[Slot<'_>],
+        log: &Log,
+    ) -> Result<(), Box<(Request, String)>> {
+        let name = read_str(&payload.name);
+        let refuse = |request, why: String| Err(Box::new((request, why)));
+        if self.swap.is_some() {
+            return refuse(request, "a swap is already under way".to_owned());
+        }
+        let Some(index) = slots.iter().position(|s| s.process.name == name) else {
+            return refuse(request, format!("no process is named `{name}`"));
+        };
+        let slot = &slots[index];
+        if !matches!(slot.state, SlotState::Running(_)) {
+            return refuse(request, format!("`{name}` is not running"));
+        }
+        let (cur_exec, cur_args) = slot.command();
+        let exec_text = read_str(&payload.exec);
+        let exec = if exec_text.is_empty() {
+            cur_exec
+        } else {
+            PathBuf::from(exec_text)
+        };
+        let args = payload.get_args().unwrap_or(cur_args);
+        let epoch = self.next_epoch;
+        self.next_epoch += 1;
+        let child = match spawn_process(config, slot.process, &exec, &args, epoch) {
+            Ok(c) => c,
+            Err(e) => {
+                return refuse(request, format!("cannot start {}: {e}", exec.display()));
+            }
+        };
+        log.event(
+            &name,
+            format_args!(
+                "swap: started {} as pid {} (epoch {epoch}); the old one drives until it is ready",
+                exec.display(),
+                child.id()
+            ),
+        );
+        let timeout = if payload.value_ns > 0 {
+            Duration::from_nanos(payload.value_ns)
+        } else {
+            DEFAULT_SWAP_TIMEOUT
+        };
+        self.swap = Some(Swap {
+            request,
+            slot: index,
+            child,
+            epoch,
+            exec,
+            args,
+            phase: SwapPhase::Starting,
+            deadline: Instant::now() + timeout,
+            timeout,
+        });
+        Ok(())
+    }
+
+    fn on_ready(&mut self, epoch: u64, log: &Log) -> Result<(), String> {
+        let Some(swap) = &mut self.swap else {
+            return Err(format!("no swap waits for epoch {epoch}"));
+        };
+        if swap.epoch != epoch || !matches!(swap.phase, SwapPhase::Starting) {
+            return Err(format!("no swap waits for epoch {epoch} to be ready"));
+        }
+        swap.phase = SwapPhase::Flipped;
+        swap.deadline = Instant::now() + swap.timeout;
+        self.publish_epoch(epoch).map_err(|e| format!("{e:#}"))?;
+        log.note(format_args!("swap: epoch {epoch} ready, now active"));
+        Ok(())
+    }
+
+    fn on_driving(
+        &mut self,
+        epoch: u64,
+        handover_ns: u64,
+        slots: &mut [Slot<'_>],
+        log: &Log,
+    ) -> Result<(), String> {
+        match &self.swap {
+            Some(s) if s.epoch == epoch && matches!(s.phase, SwapPhase::Flipped) => {}
+            _ => return Err(format!("no swap waits for epoch {epoch} to drive")),
+        }
+        let Some(swap) = self.swap.take() else {
+            return Err("no swap".to_owned());
+        };
+        let slot = &mut slots[swap.slot];
+        let name = slot.process.name.clone();
+        let new_pid = swap.child.id();
+        let old = std::mem::replace(&mut slot.state, SlotState::Running(swap.child));
+        slot.started = Some(Instant::now());
+        slot.epoch = epoch;
+        slot.exec_override = Some((swap.exec, swap.args));
+        if let SlotState::Running(old) = old {
+            signal_group(&old, libc::SIGTERM);
+            log.event(
+                &name,
+                format_args!(
+                    "swap: pid {new_pid} drives (handover {:.1} us); stopping old pid {}",
+                    handover_ns as f64 * 1e-3,
+                    old.id()
+                ),
+            );
+            self.retiring.push(Retiring {
+                name: name.clone(),
+                child: old,
+                kill_at: Instant::now() + slot.process.stop_grace,
+                killed: false,
+            });
+        }
+        let request = swap.request;
+        self.answer(&request, slots, log, Ok(handover_ns));
+        Ok(())
+    }
+
+    /// Watches the swap under way and the retiring processes.
+    pub(crate) fn poll(&mut self, slots: &[Slot<'_>], log: &Log) {
+        let now = Instant::now();
+        if let Some(swap) = &mut self.swap {
+            let exited = match swap.child.try_wait() {
+                Ok(Some(status)) => Some(describe(status)),
+                Ok(None) => None,
+                Err(e) => Some(format!("could not be watched: {e}")),
+            };
+            let why = match (exited, now >= swap.deadline) {
+                (Some(how), _) => Some(format!("the new process {how} before it drove")),
+                (None, true) => Some(format!(
+                    "the new process did not {} within {:?}",
+                    match swap.phase {
+                        SwapPhase::Starting => "become ready",
+                        SwapPhase::Flipped => "drive",
+                    },
+                    swap.timeout
+                )),
+                (None, false) => None,
+            };
+            if let Some(why) = why {
+                self.abort_swap(why, slots, log);
+            }
+        }
+        self.retiring.retain_mut(|r| match r.child.try_wait() {
+            Ok(Some(status)) => {
+                log.event(
+                    &r.name,
+                    format_args!("swap: old pid {} {}", r.child.id(), describe(status)),
+                );
+                false
+            }
+            Ok(None) => {
+                if !r.killed && now >= r.kill_at {
+                    signal_group(&r.child, libc::SIGKILL);
+                    r.killed = true;
+                }
+                true
+            }
+            Err(_) => false,
+        });
+    }
+
+    /// Kills the swap's new process, gives the drive back to the old one, answers.
+    fn abort_swap(&mut self, why: String, slots: &[Slot<'_>], log: &Log) {
+        let Some(mut swap) = self.swap.take() else {
+            return;
+        };
+        signal_group(&swap.child, libc::SIGKILL);
+        let _ = swap.child.wait();
+        let old_epoch = slots[swap.slot].epoch;
+        if self.active_epoch != old_epoch
+            && let Err(e) = self.publish_epoch(old_epoch)
+        {
+            log.note(format_args!("swap: cannot give the drive back: {e:#}"));
+        }
+        log.event(
+            &slots[swap.slot].process.name,
+            format_args!("swap refused: {why}; the old process drives on"),
+        );
+        self.answer(&swap.request, slots, log, Err(why));
+    }
+
+    /// Stops what the swaps left running (at the end of the run).
+    pub(crate) fn shutdown(&mut self, slots: &[Slot<'_>], log: &Log) {
+        if self.swap.is_some() {
+            self.abort_swap("the run is ending".to_owned(), slots, log);
+        }
+        for r in &mut self.retiring {
+            signal_group(&r.child, libc::SIGKILL);
+            let _ = r.child.wait();
+        }
+        self.retiring.clear();
+    }
+}
+
+/// Each process's state into a status reply.
+fn fill_status(slots: &[Slot<'_>], out: &mut ControlResponse) {
+    let now = Instant::now();
+    out.process_count = u32::try_from(slots.len().min(MAX_STATUS_PROCESSES)).unwrap_or(0);
+    for (slot, p) in slots.iter().zip(out.processes.iter_mut()) {
+        write_str(&mut p.name, &slot.process.name);
+        write_str(&mut p.exec, &slot.command().0.to_string_lossy());
+        p.restarts = slot.restarts;
+        p.epoch = slot.epoch;
+        p.uptime_ms = slot.started.map_or(0, |t| {
+            u64::try_from((now - t).as_millis()).unwrap_or(u64::MAX)
+        });
+        let (state, pid) = match &slot.state {
+            SlotState::Running(child) => (ProcessState::Running, child.id()),
+            SlotState::Pending { .. } => (ProcessState::Pending, 0),
+            SlotState::Done if slot.started.is_none() => (ProcessState::Pending, 0),
+            SlotState::Done => (ProcessState::Exited, 0),
+        };
+        p.state = state as u32;
+        p.pid = pid;
+    }
+}
