@@ -70,7 +70,8 @@ fn twenty_swaps_in_lockstep_lose_no_step_and_apply_none_twice() {
     let mut handovers = Vec::new();
     let mut pids = vec![planner_pid(dir.path(), name)];
     for k in 1..=20u64 {
-        let run = swap(dir.path(), name, &[]);
+        // The swap's own deadline is a safety net too: the check is the step log.
+        let run = swap(dir.path(), name, &["--timeout-s", "30"]);
         assert!(run.status.success(), "swap {k} failed: {}", run.stderr);
         let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
         assert_eq!(v["epoch"], k, "{v}");

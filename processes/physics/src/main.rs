@@ -191,6 +191,24 @@ impl Ports {
     }
 }
 
+/// A motor command that arrived before its epoch became active.
+#[derive(Debug, Clone, Copy)]
+struct Ahead {
+    step: u64,
+    epoch: u64,
+    wheels: (f64, f64),
+    received_ns: u64,
+}
+
+/// The latest active epoch the supervisor published, or `current` when none is pending.
+fn latest_epoch(epochs: &Subscriber<ipc::Service, ActiveEpoch, ()>, current: u64) -> u64 {
+    let mut epoch = current;
+    while let Ok(Some(e)) = epochs.receive() {
+        epoch = e.epoch;
+    }
+    epoch
+}
+
 struct Runner {
     sim: Sim,
     ports: Ports,
@@ -271,6 +289,11 @@ impl Runner {
             .receive()
             .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
         {
+            if r.epoch > self.active_epoch {
+                // A planner sends nothing before it saw its epoch active, so the epoch's
+                // sample is already here: read it before judging the reset.
+                self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
+            }
             // A reset of a planner that does not drive (one being swapped in or out) is
             // dropped, as its motor commands are.
             if r.epoch == self.active_epoch {
@@ -291,38 +314,52 @@ impl Runner {
         // only when the publisher updates its connections: do so at this period while idle.
         let slice = Duration::from_millis(20);
         let mut idle_since = Instant::now();
+        // A command of a newer epoch than the active one, for the step it names: kept until
+        // its epoch becomes active (a hot swap's flip), or dropped when the step passes.
+        let mut ahead: Option<Ahead> = None;
         self.publish(0, 0)?;
         loop {
             let step = self.sim.step_count();
             let mut epoch = self.active_epoch;
-            // During a hot swap the next planner's command for this step can arrive before
-            // its epoch becomes active: kept here until the flip, or dropped.
-            let mut ahead: Option<(u64, f64, f64, u64)> = None;
             let mut reset = false;
             let outcome = {
                 let commands = &self.ports.commands;
                 let resets = &self.ports.resets;
                 let epochs = &self.ports.epochs;
+                let ahead = &mut ahead;
                 waiter.wait_for(slice, || {
-                    while let Ok(Some(e)) = epochs.receive() {
-                        epoch = e.epoch;
-                    }
+                    epoch = latest_epoch(epochs, epoch);
                     if resets.has_samples().unwrap_or(false) {
                         return Some(None);
                     }
                     while let Ok(Some(c)) = commands.receive() {
-                        if c.step == step && c.epoch == epoch {
-                            let received = monotonic_ns();
-                            return Some(Some((c.left_mps, c.right_mps, received)));
+                        if c.step != step {
+                            // A command of another step: stale. Dropped.
+                            continue;
                         }
-                        if c.step == step && c.epoch > epoch {
-                            ahead = Some((c.epoch, c.left_mps, c.right_mps, monotonic_ns()));
+                        if c.epoch > epoch {
+                            // Its planner saw its epoch active before sending: the epoch's
+                            // sample may have arrived since the read above.
+                            epoch = latest_epoch(epochs, epoch);
                         }
-                        // Otherwise a command of another step or of a retired planner:
-                        // stale. Dropped.
+                        if c.epoch == epoch {
+                            return Some(Some((c.left_mps, c.right_mps, monotonic_ns())));
+                        }
+                        if c.epoch > epoch {
+                            *ahead = Some(Ahead {
+                                step,
+                                epoch: c.epoch,
+                                wheels: (c.left_mps, c.right_mps),
+                                received_ns: monotonic_ns(),
+                            });
+                        }
+                        // Otherwise a command of a retired planner: dropped.
                     }
-                    match ahead {
-                        Some((e, l, r, received)) if e == epoch => Some(Some((l, r, received))),
+                    match *ahead {
+                        Some(a) if a.step == step && a.epoch == epoch => {
+                            *ahead = None;
+                            Some(Some((a.wheels.0, a.wheels.1, a.received_ns)))
+                        }
                         _ => None,
                     }
                 })
@@ -382,14 +419,7 @@ impl Runner {
             if self.apply_resets()? {
                 wheels = (0.0, 0.0);
             }
-            while let Some(e) = self
-                .ports
-                .epochs
-                .receive()
-                .map_err(|e| anyhow::anyhow!("cannot receive the active epoch: {e:?}"))?
-            {
-                self.active_epoch = e.epoch;
-            }
+            self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
             let mut received = 0;
             while let Some(c) = self
                 .ports
@@ -397,6 +427,9 @@ impl Runner {
                 .receive()
                 .map_err(|e| anyhow::anyhow!("cannot receive a command: {e:?}"))?
             {
+                if c.epoch > self.active_epoch {
+                    self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
+                }
                 if c.epoch == self.active_epoch {
                     wheels = (c.left_mps, c.right_mps);
                     last_command = Instant::now();
