@@ -12,6 +12,8 @@ pub const MAX_STATUS_PROCESSES: usize = 16;
 /// are cut at a character boundary and end in `...`).
 pub const STATUS_NAME_LEN: usize = 32;
 pub const STATUS_PATH_LEN: usize = 256;
+/// Longest topic name of a status reply's message rate, bytes.
+pub const STATUS_TOPIC_LEN: usize = 16;
 /// Room for a swap's planner arguments, NUL-separated, bytes.
 pub const SWAP_ARGS_LEN: usize = 1024;
 
@@ -154,7 +156,7 @@ impl ProcessState {
 /// One process of a status reply.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ProcessStatus.v1")]
+#[type_name("agp::ProcessStatus.v2")]
 pub struct ProcessStatus {
     /// UTF-8, zero-padded.
     pub name: [u8; STATUS_NAME_LEN],
@@ -170,6 +172,10 @@ pub struct ProcessStatus {
     pub uptime_ms: u64,
     /// The planner epoch it runs at (`AGP_EPOCH`).
     pub epoch: u64,
+    /// Messages per second it publishes on `rate_topic`, times 1000 (0: not measured).
+    pub rate_mhz: u64,
+    /// The topic of `rate_mhz` (UTF-8, zero-padded; empty: none).
+    pub rate_topic: [u8; STATUS_TOPIC_LEN],
 }
 
 impl Default for ProcessStatus {
@@ -183,6 +189,8 @@ impl Default for ProcessStatus {
             _pad: 0,
             uptime_ms: 0,
             epoch: 0,
+            rate_mhz: 0,
+            rate_topic: [0; STATUS_TOPIC_LEN],
         }
     }
 }
@@ -190,7 +198,7 @@ impl Default for ProcessStatus {
 /// The supervisor's answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ControlResponse.v1")]
+#[type_name("agp::ControlResponse.v2")]
 pub struct ControlResponse {
     /// The [`ControlKind`] answered.
     pub kind: u32,
@@ -228,9 +236,9 @@ impl Default for ControlResponse {
 const _: () = {
     assert!(core::mem::size_of::<ControlRequest>() == 24 + 32 + 256 + 1024 + 8);
     assert!(core::mem::size_of::<ActiveEpoch>() == 16);
-    assert!(core::mem::size_of::<ProcessStatus>() == 320);
+    assert!(core::mem::size_of::<ProcessStatus>() == 344);
     assert!(core::mem::align_of::<ProcessStatus>() == 8);
-    assert!(core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 320 * MAX_STATUS_PROCESSES);
+    assert!(core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 344 * MAX_STATUS_PROCESSES);
 };
 
 /// Which planner drives: physics applies only motor commands of this epoch. Published by

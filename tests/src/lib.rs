@@ -87,11 +87,17 @@ pub struct AgpUp {
 impl AgpUp {
     /// Starts `agp up <launch> <extra...>` in the launch file's folder.
     pub fn start(launch: &Path, extra: &[&str]) -> Self {
+        let mut args = vec!["up", launch.to_str().expect("a UTF-8 launch path")];
+        args.extend_from_slice(extra);
+        Self::spawn(launch.parent().unwrap_or_else(|| Path::new(".")), &args)
+    }
+
+    /// Starts `agp <args...>` in `dir`, for a command that runs until stopped (such as
+    /// `agp swap --watch`).
+    pub fn spawn(dir: &Path, args: &[&str]) -> Self {
         let mut child = Command::new(bin_path("agp"))
-            .arg("up")
-            .arg(launch)
-            .args(extra)
-            .current_dir(launch.parent().unwrap_or_else(|| Path::new(".")))
+            .args(args)
+            .current_dir(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -122,7 +128,7 @@ impl AgpUp {
         }
     }
 
-    /// The supervisor's pid.
+    /// The pid of `agp`.
     pub fn pid(&self) -> u32 {
         self.child.id()
     }

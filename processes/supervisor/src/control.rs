@@ -81,6 +81,12 @@ pub struct ProcessReport {
     pub restarts: u32,
     pub uptime_s: f64,
     pub exec: String,
+    /// The planner epoch it runs at (0 unless swapped in).
+    pub epoch: u64,
+    /// Messages per second it publishes on `rate_topic` (physics: IR frames; the
+    /// driving planner: motor commands), over the last second.
+    pub rate_per_s: Option<f64>,
+    pub rate_topic: Option<String>,
 }
 
 /// `agp status --json`.
@@ -89,6 +95,8 @@ pub struct StatusReport {
     pub instance: String,
     pub supervisor_pid: u32,
     pub uptime_s: f64,
+    /// The epoch of the planner that drives.
+    pub active_epoch: u64,
     pub processes: Vec<ProcessReport>,
 }
 
@@ -99,6 +107,7 @@ impl StatusReport {
             instance: instance.to_owned(),
             supervisor_pid: r.supervisor_pid,
             uptime_s: r.uptime_ms as f64 * 1e-3,
+            active_epoch: r.active_epoch,
             processes: r.processes[..count]
                 .iter()
                 .map(|p| ProcessReport {
@@ -108,6 +117,9 @@ impl StatusReport {
                     restarts: p.restarts,
                     uptime_s: p.uptime_ms as f64 * 1e-3,
                     exec: read_str(&p.exec),
+                    epoch: p.epoch,
+                    rate_per_s: (p.rate_topic[0] != 0).then_some(p.rate_mhz as f64 * 1e-3),
+                    rate_topic: (p.rate_topic[0] != 0).then(|| read_str(&p.rate_topic)),
                 })
                 .collect(),
         }
@@ -120,8 +132,8 @@ impl StatusReport {
 
     pub fn print(&self) {
         println!(
-            "instance `{}`: supervisor pid {}, up {:.1} s",
-            self.instance, self.supervisor_pid, self.uptime_s
+            "instance `{}`: supervisor pid {}, up {:.1} s, active planner epoch {}",
+            self.instance, self.supervisor_pid, self.uptime_s, self.active_epoch
         );
         let width = self
             .processes
@@ -131,17 +143,23 @@ impl StatusReport {
             .unwrap_or(0)
             .max("process".len());
         println!(
-            "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>9}  exec",
-            "process", "state", "pid", "restarts", "uptime"
+            "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>9}  {:>5}  {:>24}  exec",
+            "process", "state", "pid", "restarts", "uptime", "epoch", "publishes"
         );
         for p in &self.processes {
+            let rate = match (&p.rate_topic, p.rate_per_s) {
+                (Some(topic), Some(r)) => format!("{r:.0}/s {topic}"),
+                _ => "-".to_owned(),
+            };
             println!(
-                "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>7.1} s  {}",
+                "  {:<width$}  {:<8}  {:>8}  {:>8}  {:>7.1} s  {:>5}  {:>24}  {}",
                 p.name,
                 p.state,
                 p.pid.map_or("-".to_owned(), |pid| pid.to_string()),
                 p.restarts,
                 p.uptime_s,
+                p.epoch,
+                rate,
                 p.exec
             );
         }

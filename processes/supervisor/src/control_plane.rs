@@ -28,6 +28,7 @@ use iceoryx2::prelude::{Node, ipc};
 
 use agp_supervisor::LaunchConfig;
 
+use crate::rates::MessageRates;
 use crate::up::{Log, RunEnd, Slot, SlotState, describe, signal_group, spawn_process};
 
 /// How long a swapped-in process may take to become ready, and then to drive, unless the
@@ -77,6 +78,8 @@ pub(crate) struct ControlPlane {
     seq: u64,
     swap: Option<Swap>,
     retiring: Vec<Retiring>,
+    /// `None` when the streams could not be opened (then `agp status` shows no rates).
+    rates: Option<MessageRates>,
 }
 
 fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -85,7 +88,7 @@ fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Erro
 
 impl ControlPlane {
     /// Creates the control service and publishes epoch 0 (the launch file's processes).
-    pub(crate) fn open(instance: &Instance, node: &Node<ipc::Service>) -> Result<Self> {
+    pub(crate) fn open(instance: &Instance, node: &Node<ipc::Service>, log: &Log) -> Result<Self> {
         let service = instance.create_control(node)?;
         let server = service
             .server_builder()
@@ -113,6 +116,15 @@ impl ControlPlane {
             seq: 0,
             swap: None,
             retiring: Vec::new(),
+            rates: match MessageRates::open(instance, node) {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    log.note(format_args!(
+                        "`agp status` will show no message rates: {e:#}"
+                    ));
+                    None
+                }
+            },
         };
         plane.publish_epoch(0)?;
         Ok(plane)
@@ -215,7 +227,7 @@ impl ControlPlane {
         if let Err(why) = &result {
             write_str(&mut response.message, why);
         }
-        fill_status(slots, &mut response);
+        fill_status(slots, self.rates.as_ref(), &mut response);
         if let Err(e) = request.send_copy(response) {
             log.note(format_args!("control service: cannot answer: {e:?}"));
         }
@@ -344,6 +356,9 @@ impl ControlPlane {
 
     /// Watches the swap under way and the retiring processes.
     pub(crate) fn poll(&mut self, slots: &[Slot<'_>], log: &Log) {
+        if let Some(rates) = &mut self.rates {
+            rates.poll(self.active_epoch);
+        }
         let now = Instant::now();
         if let Some(swap) = &mut self.swap {
             let exited = match swap.child.try_wait() {
@@ -419,8 +434,24 @@ impl ControlPlane {
     }
 }
 
+/// The stream a process publishes that `agp status` shows the rate of, known by the
+/// process's name or executable: physics's IR frames, the planner's motor commands.
+fn rate_of(slot: &Slot<'_>, rates: &MessageRates) -> Option<(&'static str, f64)> {
+    let exec = slot.command().0;
+    let stem = exec.file_stem().map(|s| s.to_string_lossy().into_owned());
+    let is =
+        |what: &str| slot.process.name == what || stem.as_deref() == Some(&format!("agp-{what}"));
+    if is("physics") {
+        Some(("ir_frames", rates.frames_per_s()))
+    } else if is("planner") {
+        Some(("motor_commands", rates.commands_per_s()))
+    } else {
+        None
+    }
+}
+
 /// Each process's state into a status reply.
-fn fill_status(slots: &[Slot<'_>], out: &mut ControlResponse) {
+fn fill_status(slots: &[Slot<'_>], rates: Option<&MessageRates>, out: &mut ControlResponse) {
     let now = Instant::now();
     out.process_count = u32::try_from(slots.len().min(MAX_STATUS_PROCESSES)).unwrap_or(0);
     for (slot, p) in slots.iter().zip(out.processes.iter_mut()) {
@@ -439,5 +470,11 @@ fn fill_status(slots: &[Slot<'_>], out: &mut ControlResponse) {
         };
         p.state = state as u32;
         p.pid = pid;
+        if let Some((topic, rate)) = rates.and_then(|r| rate_of(slot, r))
+            && state == ProcessState::Running
+        {
+            write_str(&mut p.rate_topic, topic);
+            p.rate_mhz = (rate * 1e3).round() as u64;
+        }
     }
 }

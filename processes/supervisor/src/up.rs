@@ -178,7 +178,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         }
     };
 
-    let mut control = match ControlPlane::open(&instance, &node) {
+    let mut control = match ControlPlane::open(&instance, &node, &log) {
         Ok(c) => c,
         Err(e) => {
             drop(services);
