@@ -26,6 +26,10 @@ pub enum DriveError {
     NotActivated { epoch: u64, timeout: Duration },
     #[error("iceoryx2 {0}")]
     Port(String),
+    /// Physics restarted (a new world, counting steps from 0): the driver now follows the
+    /// new one; whatever was under way must start again, from a reset.
+    #[error("physics restarted")]
+    PhysicsRestarted,
 }
 
 /// Drives a lockstep physics process directly: sends a motor command for the current step,
@@ -48,6 +52,9 @@ pub struct LockstepDriver {
     epoch: u64,
     timeout: Duration,
     resets_sent: u64,
+    /// `trace_id - step` of the physics process being driven: each run of physics has its
+    /// own, so a frame with another one comes from a restarted physics.
+    trace_base: u64,
 }
 
 fn port<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> DriveError {
@@ -124,6 +131,7 @@ impl LockstepDriver {
             epoch,
             timeout,
             resets_sent: 0,
+            trace_base: 0,
             _node: node,
         };
         driver.frame = driver.wait_frame(|_| true, 0)?;
@@ -178,23 +186,36 @@ impl LockstepDriver {
         &self.last_truth
     }
 
+    /// Waits for a frame `accept` takes (the latest of them). A frame of another physics
+    /// run than the last one seen means physics restarted: that frame becomes the latest
+    /// and the wait ends with [`DriveError::PhysicsRestarted`].
     fn wait_frame(
         &mut self,
         accept: impl Fn(&IrFrame) -> bool,
         step: u64,
     ) -> Result<IrFrame, DriveError> {
         let frames = &self.frames;
+        let base = self.trace_base;
+        let first = base == 0;
         let outcome = self.waiter.wait_for(self.timeout, || {
             let mut found = None;
             while let Ok(Some(f)) = frames.receive() {
-                if accept(&f) {
-                    found = Some(*f);
+                let run = f.timing.trace_id.wrapping_sub(f.step);
+                if !first && run != base {
+                    found = Some(Err(*f));
+                } else if accept(&f) && !matches!(found, Some(Err(_))) {
+                    found = Some(Ok(*f));
                 }
             }
             found
         });
         let frame = match outcome {
-            WaitOutcome::Ready(f) => f,
+            WaitOutcome::Ready(Ok(f)) => f,
+            WaitOutcome::Ready(Err(f)) => {
+                self.trace_base = f.timing.trace_id.wrapping_sub(f.step);
+                self.frame = f;
+                return Err(DriveError::PhysicsRestarted);
+            }
             WaitOutcome::TimedOut => {
                 return Err(DriveError::NoFrame {
                     step,
@@ -203,6 +224,9 @@ impl LockstepDriver {
             }
             WaitOutcome::Shutdown => return Err(DriveError::Shutdown),
         };
+        if first {
+            self.trace_base = frame.timing.trace_id.wrapping_sub(frame.step);
+        }
         if let Some(t) = &self.truth {
             // Physics publishes a step's truth before its frame.
             while let Ok(Some(s)) = t.receive() {

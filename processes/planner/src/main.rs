@@ -152,52 +152,57 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
         "scripted drive: {} pushes of `{}`, {} ms each",
         args.pushes, scenario.name, args.push_ms
     );
-    for k in 0..args.pushes {
+    let mut k = 0;
+    while k < args.pushes {
         let side = obj.theta + std::f64::consts::TAU * k as f64 / args.pushes.max(1) as f64;
         let (x, y) = (obj.x + radius * side.cos(), obj.y + radius * side.sin());
         let heading = wrap_angle(side + std::f64::consts::PI);
         // The learning phase puts the object back before each trial; so does the script.
-        let frame = match driver.reset(
-            Pose2::new(obj.x, obj.y, obj.theta),
-            Pose2::new(x, y, heading),
-        ) {
-            Ok(f) => *f,
+        let push = (|| -> Result<(), DriveError> {
+            let frame = *driver.reset(
+                Pose2::new(obj.x, obj.y, obj.theta),
+                Pose2::new(x, y, heading),
+            )?;
+            let start_odo = frame.odometry;
+            let mut routine = PushRoutine::new(settings, frame.sim_time_s);
+            let mut peak = 0f32;
+            loop {
+                let f = *driver.frame();
+                peak = peak.max(f.ir_raw[0].max(f.ir_raw[7]));
+                if let PushPhase::Done { contact } = routine.phase() {
+                    let odo = f.odometry;
+                    println!(
+                        "  push {}/{} from {:>5.1} deg: {}, front IR peak {:>6.0}, robot travelled {:>5.1} mm by odometry",
+                        k + 1,
+                        args.pushes,
+                        side.to_degrees(),
+                        if contact {
+                            "contact inferred from IR"
+                        } else {
+                            "no contact"
+                        },
+                        peak,
+                        (odo.x - start_odo.x).hypot(odo.y - start_odo.y) * 1e3
+                    );
+                    return Ok(());
+                }
+                let (l, r) = routine.update(&sense, f.sim_time_s, f.ir_sample, &f.ir_raw);
+                let next = driver.step(l, r)?;
+                if let Some(s) = swap_in.take() {
+                    let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
+                    s.driving(applied)
+                        .map_err(|e| DriveError::Port(format!("{e:#}")))?;
+                }
+            }
+        })();
+        match push {
+            Ok(()) => k += 1,
+            Err(DriveError::PhysicsRestarted) => {
+                // A new world: this push again, from its reset.
+                println!("  physics restarted: push {} again", k + 1);
+            }
             Err(DriveError::Shutdown) => return Ok(()),
             Err(e) => return Err(e.into()),
-        };
-        let start_odo = frame.odometry;
-        let mut routine = PushRoutine::new(settings, frame.sim_time_s);
-        let mut peak = 0f32;
-        loop {
-            let f = *driver.frame();
-            peak = peak.max(f.ir_raw[0].max(f.ir_raw[7]));
-            if let PushPhase::Done { contact } = routine.phase() {
-                let odo = f.odometry;
-                println!(
-                    "  push {}/{} from {:>5.1} deg: {}, front IR peak {:>6.0}, robot travelled {:>5.1} mm by odometry",
-                    k + 1,
-                    args.pushes,
-                    side.to_degrees(),
-                    if contact {
-                        "contact inferred from IR"
-                    } else {
-                        "no contact"
-                    },
-                    peak,
-                    (odo.x - start_odo.x).hypot(odo.y - start_odo.y) * 1e3
-                );
-                break;
-            }
-            let (l, r) = routine.update(&sense, f.sim_time_s, f.ir_sample, &f.ir_raw);
-            match driver.step(l, r) {
-                Ok(next) => {
-                    if let Some(s) = swap_in.take() {
-                        s.driving(next.timing.stamps_ns[stage::COMMAND_APPLIED])?;
-                    }
-                }
-                Err(DriveError::Shutdown) => return Ok(()),
-                Err(e) => return Err(e.into()),
-            }
         }
     }
     println!("scripted drive done");

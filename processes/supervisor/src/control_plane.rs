@@ -24,6 +24,7 @@ use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{Node, ipc};
 
 use agp_supervisor::LaunchConfig;
@@ -356,6 +357,9 @@ impl ControlPlane {
 
     /// Watches the swap under way and the retiring processes.
     pub(crate) fn poll(&mut self, slots: &[Slot<'_>], log: &Log) {
+        // A restarted physics subscribes anew: hand it the latched epoch now, not at the
+        // next swap.
+        let _ = self.epochs.update_connections();
         if let Some(rates) = &mut self.rates {
             rates.poll(self.active_epoch);
         }
