@@ -12,6 +12,9 @@ use crate::Grid;
 /// Smallest coarse rotation step, degrees (at most 60 coarse trials).
 const MIN_COARSE_STEP_DEG: f64 = 6.0;
 
+/// Words of a one-bit-per-cell mask of a grid.
+const MASK_WORDS: usize = GRID_CELLS.div_ceil(64);
+
 /// Least number of points [`ShapeMatcher::match_points`] accepts.
 pub const MIN_MATCH_POINTS: usize = 8;
 
@@ -206,11 +209,12 @@ pub struct ShapeMatcher {
     distance: Vec<f32>,
     /// Index in `border` of the nearest border point to each cell centre.
     nearest: Vec<u32>,
-    /// Cells where S is non-zero (paper's method).
-    mask: Vec<bool>,
-    /// Per-cell stamp to count each cell once (paper's method).
-    stamps: Vec<u32>,
-    stamp: u32,
+    /// Cells where S is non-zero (paper's method), one bit per cell in [`Grid::index`]
+    /// order.
+    mask: Vec<u64>,
+    /// Cells hit by the points at one trial rotation (paper's method), same layout, so
+    /// that each cell counts once.
+    hit: Vec<u64>,
     /// Scratch of the searches.
     trials: Vec<Trial>,
     refined: Vec<Trial>,
@@ -249,14 +253,23 @@ impl ShapeMatcher {
             }
         }
         let paper_min = config.paper_threshold * max;
-        let mask: Vec<bool> = shape.cells().iter().map(|&c| c > paper_min).collect();
+        let mut mask = vec![0_u64; MASK_WORDS];
+        for (c, _) in shape
+            .cells()
+            .iter()
+            .enumerate()
+            .filter(|&(_, &v)| v > paper_min)
+        {
+            mask[c / 64] |= 1 << (c % 64);
+        }
         // The paper's computeCentroid: the mean of the cells above the threshold. Unlike
         // the ridge points, whose density depends on the edges' directions, the band of
         // cells has the same width along every edge, so its mean is the border's.
         let (mut count, mut sum) = (0usize, DVec2::ZERO);
         for j in 0..GRID_SIDE {
             for i in 0..GRID_SIDE {
-                if mask[Grid::index(i, j)] {
+                let c = Grid::index(i, j);
+                if mask[c / 64] & (1 << (c % 64)) != 0 {
                     count += 1;
                     sum += shape.cell_centre_m(i, j);
                 }
@@ -282,8 +295,7 @@ impl ShapeMatcher {
             distance,
             nearest,
             mask,
-            stamps: vec![0; GRID_CELLS],
-            stamp: 0,
+            hit: vec![0; MASK_WORDS],
             trials: Vec::with_capacity(coarse.max(paper)),
             refined: Vec::with_capacity(config.candidates),
             cross: Mat::zeros(2, 2),
@@ -462,30 +474,32 @@ impl ShapeMatcher {
         let step = self.config.paper_step_deg.to_radians();
         let n = (TAU / step).round().max(1.0) as usize;
         self.trials.clear();
+        // Cell coordinates (cell (i, j) spans [i, i + 1) x [j, j + 1)) of a point q of the
+        // object frame: q * inv_cell - origin / cell. A point p maps to
+        // q = R(-theta) (p - centroid) + border_centroid, so to the cell coordinates
+        // (R(-theta) inv_cell) (p - centroid) + centre, with no division per point.
+        let centre = (self.border_centroid - self.geometry.origin_m()) * self.inv_cell;
+        let side = GRID_SIDE as f64;
         for k in 0..n {
             let theta = k as f64 * TAU / n as f64;
-            let to_obj = DVec2::from_angle(-theta);
-            self.stamp = self.stamp.wrapping_add(1);
-            if self.stamp == 0 {
-                self.stamps.fill(0);
-                self.stamp = 1;
-            }
-            let mut count = 0_u32;
+            let to_cells = DVec2::from_angle(-theta) * self.inv_cell;
+            self.hit.fill(0);
+            let mut count = 0_u64;
             for &p in points {
-                let q = to_obj.rotate(p - centroid) + self.border_centroid;
-                if let Some((i, j)) = self.geometry.cell_at(q) {
-                    let c = Grid::index(i, j);
-                    if self.stamps[c] != self.stamp {
-                        self.stamps[c] = self.stamp;
-                        count += u32::from(self.mask[c]);
-                    }
+                let c = to_cells.rotate(p - centroid) + centre;
+                if c.x >= 0.0 && c.y >= 0.0 && c.x < side && c.y < side {
+                    let cell = Grid::index(c.x as usize, c.y as usize);
+                    let (word, bit) = (cell / 64, cell % 64);
+                    // Counts the cell if it is in the mask and not yet hit; no branch.
+                    count += ((self.mask[word] & !self.hit[word]) >> bit) & 1;
+                    self.hit[word] |= 1 << bit;
                 }
             }
             let t = centroid - DVec2::from_angle(theta).rotate(self.border_centroid);
             self.trials.push(Trial {
                 theta,
                 t,
-                score: -f64::from(count),
+                score: -(count as f64),
             });
         }
         let period = if self.config.symmetry_order == 0 {
