@@ -153,3 +153,56 @@ fn status_and_down_of_an_instance_that_is_not_up_say_so_and_leave_nothing() {
     assert!(!run.status.success());
     assert!(run.stderr.contains("no --instance given"), "{}", run.stderr);
 }
+
+#[test]
+fn two_instances_run_side_by_side_and_share_nothing() {
+    let names = ["t-ctl-twin-a", "t-ctl-twin-b"];
+    let dirs = names.map(|n| LaunchDir::new(&launch(n)));
+    for d in &dirs {
+        let up = run_agp(d.path(), &["up", "--detach"], TIMEOUT);
+        assert!(up.status.success(), "{}{}", up.stdout, up.stderr);
+    }
+    let pids: Vec<Vec<u32>> = names
+        .iter()
+        .zip(&dirs)
+        .map(|(n, d)| {
+            let s = status_json(d.path(), n);
+            assert_eq!(s["instance"], *n);
+            ["alpha", "beta"]
+                .iter()
+                .map(|p| pid_of(&s, p).expect("running"))
+                .collect()
+        })
+        .collect();
+    assert!(
+        pids[0].iter().all(|p| !pids[1].contains(p)),
+        "the instances share a process: {pids:?}"
+    );
+    // Down one: the other runs on, untouched.
+    let down = run_agp(dirs[0].path(), &["down"], TIMEOUT);
+    assert!(down.status.success(), "{}", down.stderr);
+    assert_eq!(
+        count_instance_files(names[0]),
+        0,
+        "files of `{}` remain",
+        names[0]
+    );
+    assert!(
+        count_instance_files(names[1]) > 0,
+        "`{}` lost its files",
+        names[1]
+    );
+    let s = status_json(dirs[1].path(), names[1]);
+    for (p, pid) in ["alpha", "beta"].iter().zip(&pids[1]) {
+        assert_eq!(pid_of(&s, p), Some(*pid), "{s}");
+        assert!(!process_is_gone(*pid));
+    }
+    let down = run_agp(dirs[1].path(), &["down"], TIMEOUT);
+    assert!(down.status.success(), "{}", down.stderr);
+    assert_eq!(
+        count_instance_files(names[1]),
+        0,
+        "files of `{}` remain",
+        names[1]
+    );
+}
