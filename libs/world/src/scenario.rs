@@ -63,7 +63,10 @@ impl ObjectShape {
         match self {
             Self::Circle { .. } => 0,
             Self::Polygon(p) => {
-                let tol = 1e-3 * p.radius().max(1e-9);
+                // 1 % of the size: a file's vertices are rounded (a pentagon written to
+                // 0.1 mm is off by up to 0.07 mm), and IR cannot tell apart poses that
+                // differ by less than a millimetre anyway.
+                let tol = 1e-2 * p.radius().max(1e-9);
                 (2..=12u32)
                     .rev()
                     .find(|&k| {

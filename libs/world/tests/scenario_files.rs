@@ -191,3 +191,24 @@ fn a_missing_file_and_an_unknown_name_are_told_apart() {
         "{e}"
     );
 }
+
+#[test]
+fn a_regular_polygon_written_to_a_tenth_of_a_millimetre_keeps_its_symmetry() {
+    // The example file's pentagon: vertices rounded to 0.1 mm (up to 0.07 mm off).
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios/pentagon.toml");
+    let pentagon = Scenario::load(&file).expect("the example loads");
+    assert_eq!(pentagon.object.shape.symmetry_order(), 5);
+    // A 60 x 40 mm rectangle turns onto itself by half a turn only; a quadrilateral 3 mm off
+    // a square (more than IR tells apart) has no symmetry.
+    let shape = |mm: &[[f64; 2]]| {
+        let v = mm
+            .iter()
+            .map(|p| glam::DVec2::new(p[0], p[1]) * 1e-3)
+            .collect();
+        ObjectShape::Polygon(agp_world::Polygon::new(v).expect("a polygon").centred())
+    };
+    let rect = shape(&[[30.0, 20.0], [-30.0, 20.0], [-30.0, -20.0], [30.0, -20.0]]);
+    assert_eq!(rect.symmetry_order(), 2);
+    let skew = shape(&[[33.0, 30.0], [-30.0, 30.0], [-30.0, -30.0], [30.0, -30.0]]);
+    assert_eq!(skew.symmetry_order(), 1);
+}

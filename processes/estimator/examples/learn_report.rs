@@ -3,21 +3,19 @@
 //! then 200 unseen pushes to check the predictions and the poses from the trials'
 //! circlings, against the simulator's ground truth.
 //!
-//! `cargo run --release -p agp-estimator --example learn_report -- [OBJECT ...]
-//!  [--seed N] [--method front-ir-mean|body-sweep|heading-line] [--eval N] [--push-s S]
+//! `cargo run --release -p agp-estimator --example learn_report -- [OBJECT|FILE ...]
+//!  [--seed N] [--trials N] [--method front-ir-mean|body-sweep|heading-line] [--eval N] [--push-s S]
 //!  [--alphas 0,15,-15]
 //!  [--no-approach-points] [--circle-defaults] [--save-dir DIR]`
-
-#[path = "../tests/harness/mod.rs"]
-mod harness;
 
 use std::process::ExitCode;
 use std::time::Instant;
 
-use agp_estimator::ContactMethod;
+use agp_estimator::{ContactMethod, LearnBenchConfig, format_report, run_object};
+use agp_world::Scenario;
 
 fn main() -> ExitCode {
-    let mut cfg = harness::HarnessConfig::default();
+    let mut cfg = LearnBenchConfig::default();
     let mut objects = Vec::new();
     let mut save_dir: Option<std::path::PathBuf> = None;
     let mut args = std::env::args().skip(1);
@@ -28,6 +26,11 @@ fn main() -> ExitCode {
                 v.parse()
                     .map(|s| cfg.seed = s)
                     .map_err(|e| format!("bad seed `{v}`: {e}"))
+            }),
+            "--trials" => value("--trials").and_then(|v| {
+                v.parse()
+                    .map(|n| cfg.trials_per_alpha = n)
+                    .map_err(|e| format!("bad count `{v}`: {e}"))
             }),
             "--eval" => value("--eval").and_then(|v| {
                 v.parse()
@@ -62,14 +65,10 @@ fn main() -> ExitCode {
                 cfg.approach_refines_shape = false;
                 Ok(())
             }
-            name if agp_world::BUILTIN_NAMES.contains(&name) => {
-                objects.push(name.to_owned());
-                Ok(())
-            }
-            other => Err(format!(
-                "unknown argument `{other}` (objects: {})",
-                agp_world::BUILTIN_NAMES.join(", ")
-            )),
+            flag if flag.starts_with("--") => Err(format!("unknown flag `{flag}`")),
+            name_or_file => Scenario::resolve(name_or_file)
+                .map(|s| objects.push(s))
+                .map_err(|e| e.to_string()),
         };
         if let Err(e) = result {
             eprintln!("learn_report: error: {e}");
@@ -78,8 +77,9 @@ fn main() -> ExitCode {
     }
     if objects.is_empty() {
         objects = ["triangle", "square", "lshape", "circle"]
-            .map(String::from)
-            .to_vec();
+            .iter()
+            .filter_map(|n| Scenario::builtin(n))
+            .collect();
     }
     println!(
         "learning phase: seed {}, {} trials per alpha, {} unseen pushes, push {:.1} s at {:.0} mm/s, contact method {}",
@@ -91,9 +91,16 @@ fn main() -> ExitCode {
         cfg.contact_method.name()
     );
     let wall = Instant::now();
-    for name in &objects {
-        let r = harness::run_object(name, &cfg);
-        print!("{}", harness::format_report(&r));
+    for scenario in &objects {
+        let name = &scenario.name;
+        let r = match run_object(scenario, &cfg, &mut |_| {}) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("learn_report: error: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        print!("{}", format_report(&r));
         if let Some(dir) = &save_dir {
             let path = dir.join(format!("{name}.ag"));
             if let Err(e) = r.gradient.save(&path) {

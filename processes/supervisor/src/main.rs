@@ -1,5 +1,6 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
+mod bench_learn;
 mod control;
 mod control_plane;
 mod instance_lock;
@@ -50,6 +51,12 @@ enum Cmd {
     Probe {
         #[command(subcommand)]
         what: ProbeCmd,
+    },
+    /// Run a benchmark of the paper (../shared/spec/benchmarks.md) and print our figures
+    /// beside the paper's; `--json FILE` writes them for scripts.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCmd,
     },
 }
 
@@ -122,6 +129,18 @@ struct DownArgs {
 }
 
 #[derive(Debug, Subcommand)]
+enum BenchCmd {
+    /// The learning phase (benchmarks.md section 1) for each object: the trials of the
+    /// paper's protocol, then unseen pushes to test the learned gradients' predictions, and
+    /// the pose from one circling, against ground truth. Writes each object's AG file and a
+    /// plot of its gradients (like the paper's Fig. 2). The physics runs in-process (the
+    /// rapier simulator linked as a library), not as the physics process.
+    ///
+    /// Example: agp bench learn --scenario triangle --json learn.json
+    Learn(bench_learn::BenchLearnArgs),
+}
+
+#[derive(Debug, Subcommand)]
 enum ProbeCmd {
     /// Push the object once from a given side and direction, and report how it moved.
     ///
@@ -143,6 +162,9 @@ fn main() -> ExitCode {
         Cmd::Status(args) => status(args),
         Cmd::Down(args) => down(args),
         Cmd::Swap(args) => swap(args),
+        Cmd::Bench {
+            what: BenchCmd::Learn(args),
+        } => bench_learn::run(args).map(|_| 0),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {

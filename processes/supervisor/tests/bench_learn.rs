@@ -1,0 +1,339 @@
+//! `agp bench learn` (src/bench_learn.rs), called through its clap arguments in-process on
+//! a quick protocol: what a user and the scripts reading the JSON rely on.
+
+#[path = "../src/bench_learn.rs"]
+mod bench_learn;
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use agp_affordance::AffordanceGradient;
+use bench_learn::{BenchLearnArgs, run};
+use clap::Parser;
+use serde_json::Value;
+
+/// `agp bench learn`'s arguments as the command line gives them.
+#[derive(Debug, Parser)]
+struct Cli {
+    #[command(flatten)]
+    args: BenchLearnArgs,
+}
+
+fn args(line: &[&str]) -> BenchLearnArgs {
+    Cli::try_parse_from(std::iter::once("learn").chain(line.iter().copied()))
+        .expect("valid arguments")
+        .args
+}
+
+fn path_arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
+#[test]
+fn the_defaults_are_the_benchmarks_protocol_on_the_four_built_ins() {
+    let a = args(&[]);
+    assert!(a.scenarios.is_empty(), "empty means the four built-ins");
+    assert_eq!(a.eval, 200);
+    assert_eq!(a.seed, 7);
+    assert_eq!(a.trials, 60);
+    assert_eq!(a.push_s, 0.5);
+    assert_eq!(a.out, Path::new("results/learn"));
+    assert_eq!(a.json, None);
+}
+
+#[test]
+fn alphas_are_a_comma_list_that_takes_negative_numbers() {
+    assert_eq!(args(&[]).alphas, [0.0, 15.0, -15.0]);
+    assert_eq!(args(&["--alphas", "-5,0,5"]).alphas, [-5.0, 0.0, 5.0]);
+}
+
+#[test]
+fn an_alpha_given_twice_is_refused() {
+    let err = run(&args(&["--alphas", "0,15,0"])).expect_err("refused");
+    assert!(format!("{err:#}").contains("given twice"), "{err:#}");
+}
+
+#[test]
+fn scenarios_are_given_as_a_comma_list_or_by_repeating_the_flag() {
+    let a = args(&["--scenario", "triangle,lshape", "--scenario", "my.toml"]);
+    assert_eq!(a.scenarios, ["triangle", "lshape", "my.toml"]);
+}
+
+#[test]
+fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let json = dir.path().join("learn.json");
+    let out = dir.path().join("ags");
+    let code = run(&args(&[
+        "--scenario",
+        "triangle",
+        "--trials",
+        "10",
+        "--eval",
+        "20",
+        "--json",
+        &path_arg(&json),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect("the bench runs");
+    assert_eq!(code, ExitCode::SUCCESS);
+
+    let text = std::fs::read_to_string(&json).expect("the JSON file is written");
+    let doc: Value = serde_json::from_str(&text).expect("valid JSON");
+    assert_eq!(doc["benchmark"], "learn");
+    assert_eq!(doc["seed"], 7);
+    assert!(doc["wall_time_s"].as_f64().is_some_and(|t| t > 0.0));
+    // Ten trials and twenty pushes are not the benchmark's protocol, and it says so.
+    assert_eq!(doc["protocol_as_specified"], false);
+    let tri = &doc["objects"]["triangle"];
+    for alpha in ["0", "15", "-15"] {
+        let deg = tri["max_rotation_deg"][alpha].as_f64();
+        assert!(
+            deg.is_some_and(|d| d > 0.0 && d < 180.0),
+            "max_rotation_deg[{alpha}] = {deg:?}"
+        );
+    }
+    let paper = &tri["paper_max_rotation_deg"];
+    assert_eq!(paper["0"], 39.51);
+    assert_eq!(paper["15"], 59.06);
+    assert_eq!(paper["-15"], 79.78);
+    let p = &tri["prediction"];
+    assert_eq!(p["pushes"], 20);
+    for field in [
+        "median_displacement_error_mm",
+        "median_displacement_error_ratio",
+        "median_rotation_error_deg",
+    ] {
+        assert!(
+            p[field].as_f64().is_some_and(|v| v >= 0.0),
+            "prediction.{field} = {}",
+            p[field]
+        );
+    }
+    for field in ["median_position_error_mm", "median_orientation_error_deg"] {
+        assert!(
+            tri["pose"][field].as_f64().is_some_and(|v| v >= 0.0),
+            "pose.{field} = {}",
+            tri["pose"][field]
+        );
+    }
+    // Twenty unseen pushes miss the ">= 200" target: listed, never hidden.
+    let missed = doc["targets_missed"].as_array().expect("a list");
+    assert!(
+        missed.iter().any(|m| m
+            .as_str()
+            .is_some_and(|m| m.contains("unseen pushes >= 200"))),
+        "{missed:?}"
+    );
+
+    let ag = AffordanceGradient::load(out.join("triangle.ag")).expect("a valid AG file");
+    assert_eq!(ag.object_name(), "triangle");
+    assert_eq!(ag.alphas_deg().count(), 3);
+    let svg = std::fs::read_to_string(out.join("triangle.svg")).expect("the plot is written");
+    assert!(svg.contains("<svg"), "not an SVG");
+    // Nothing else is left in the folders (no temporary or probe files).
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .expect("the out folder")
+        .map(|e| {
+            e.expect("an entry")
+                .file_name()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    names.sort();
+    assert_eq!(names, ["triangle.ag", "triangle.svg"]);
+}
+
+#[test]
+fn a_bad_scenario_file_is_one_clear_error_and_nothing_is_written() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let bad = dir.path().join("bowtie.toml");
+    std::fs::write(
+        &bad,
+        "name = \"bowtie\"\n[object]\nshape = \"polygon\"\n\
+         vertices_mm = [[0, 0], [50, 50], [50, 0], [0, 50]]\n\
+         mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
+    )
+    .expect("write the scenario");
+    let json = dir.path().join("learn.json");
+    let out = dir.path().join("ags");
+    let err = run(&args(&[
+        "--scenario",
+        &format!("triangle,{}", bad.display()),
+        "--json",
+        &path_arg(&json),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect_err("the file is refused");
+    let message = format!("{err:#}");
+    assert!(message.contains("bowtie.toml"), "{message}");
+    assert!(!json.exists(), "a JSON file was written");
+    assert!(!out.exists(), "the out folder was created before the check");
+}
+
+#[test]
+fn an_out_folder_that_cannot_be_created_fails_before_any_learning() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "").expect("write a file");
+    let json = dir.path().join("learn.json");
+    let err = run(&args(&[
+        "--scenario",
+        "triangle",
+        "--json",
+        &path_arg(&json),
+        "--out",
+        &path_arg(&file.join("ags")),
+    ]))
+    .expect_err("no folder under a file");
+    let message = format!("{err:#}");
+    assert!(message.contains("--out"), "{message}");
+    assert!(!json.exists(), "a JSON file was written");
+}
+
+#[test]
+fn two_scenarios_naming_the_same_object_are_refused() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let twin = dir.path().join("twin.toml");
+    std::fs::write(
+        &twin,
+        "name = \"triangle\"\n[object]\nshape = \"circle\"\nradius_mm = 30\n\
+         mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
+    )
+    .expect("write the scenario");
+    let out = dir.path().join("ags");
+    let err = run(&args(&[
+        "--scenario",
+        &format!("triangle,{}", twin.display()),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect_err("refused");
+    assert!(format!("{err:#}").contains("overwrite"), "{err:#}");
+}
+
+#[test]
+#[ignore = "the full protocol on the four built-ins (several seconds per object in release, more in dev); run with --ignored --nocapture to see the tables"]
+fn the_benchmarks_protocol_runs_on_the_four_built_ins_and_reports_each() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let json = dir.path().join("learn.json");
+    let out = dir.path().join("ags");
+    let code = run(&args(&[
+        "--json",
+        &path_arg(&json),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect("the bench runs");
+    assert_eq!(code, ExitCode::SUCCESS);
+    let text = std::fs::read_to_string(&json).expect("the JSON file is written");
+    println!("{text}");
+    let doc: Value = serde_json::from_str(&text).expect("valid JSON");
+    assert_eq!(doc["protocol_as_specified"], true);
+    for object in ["triangle", "square", "lshape", "circle"] {
+        assert_eq!(
+            doc["objects"][object]["prediction"]["pushes"], 200,
+            "{object}"
+        );
+        assert!(out.join(format!("{object}.ag")).is_file(), "{object}.ag");
+        assert!(out.join(format!("{object}.svg")).is_file(), "{object}.svg");
+    }
+}
+
+/// The `agp` binary, once `agp bench learn` is wired into main.rs.
+fn agp(dir: &Path, line: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_agp"))
+        .current_dir(dir)
+        .args(["bench", "learn"])
+        .args(line)
+        .output()
+        .expect("`agp` runs")
+}
+
+#[test]
+fn the_agp_binary_prints_json_on_stdout_with_json_dash_and_the_tables_on_stderr() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let out = agp(
+        dir.path(),
+        &[
+            "--scenario",
+            "circle",
+            "--trials",
+            "6",
+            "--eval",
+            "5",
+            "--json",
+            "-",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: Value = serde_json::from_slice(&out.stdout).expect("stdout is the JSON alone");
+    assert_eq!(doc["benchmark"], "learn");
+    assert_eq!(doc["objects"]["circle"]["prediction"]["pushes"], 5);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("physics in-process"), "{stderr}");
+    assert!(dir.path().join("results/learn/circle.ag").is_file());
+}
+
+#[test]
+fn the_agp_binary_exits_non_zero_with_one_line_for_a_missing_scenario_file() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let out = agp(dir.path(), &["--scenario", "no-such-file.toml"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("no-such-file.toml"), "{stderr}");
+    assert!(
+        !dir.path().join("results").exists(),
+        "something was written"
+    );
+}
+
+#[test]
+fn an_object_too_large_for_the_gradient_fails_before_any_object_is_learned() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let huge = dir.path().join("huge.toml");
+    std::fs::write(
+        &huge,
+        "name = \"huge\"\n[object]\nshape = \"circle\"\nradius_mm = 400\n\
+         mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
+    )
+    .expect("write the scenario");
+    let out = dir.path().join("ags");
+    let err = run(&args(&[
+        "--scenario",
+        &format!("triangle,{}", huge.display()),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect_err("refused");
+    let message = format!("{err:#}");
+    assert!(message.contains("`huge` is too large"), "{message}");
+    assert!(message.contains("huge.toml"), "{message}");
+    assert!(!out.exists(), "the triangle was learned before the check");
+}
+
+#[test]
+fn a_json_file_in_a_missing_folder_fails_before_the_out_folder_is_made() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let json = dir.path().join("no-such-folder/learn.json");
+    let out = dir.path().join("ags");
+    let err = run(&args(&[
+        "--scenario",
+        "triangle",
+        "--json",
+        &path_arg(&json),
+        "--out",
+        &path_arg(&out),
+    ]))
+    .expect_err("refused");
+    assert!(format!("{err:#}").contains("--json"), "{err:#}");
+    assert!(!out.exists(), "the out folder was made before the check");
+}
