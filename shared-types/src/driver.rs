@@ -168,10 +168,15 @@ impl LockstepDriver {
             std::thread::sleep(Duration::from_micros(50));
         }
         let frames = &self.frames;
+        let mut taken = false;
         while let Ok(Some(f)) = frames.receive() {
             if f.step >= self.frame.step {
                 self.frame = *f;
+                taken = true;
             }
+        }
+        if taken {
+            self.frame.timing.stamps_ns[stage::PLANNER_RECEIVED] = monotonic_ns();
         }
         Ok(&self.frame)
     }
@@ -206,6 +211,10 @@ impl LockstepDriver {
                 } else if accept(&f) && !matches!(found, Some(Err(_))) {
                     found = Some(Ok(*f));
                 }
+            }
+            // The planner's receive is stamped on the frame the wait returns, once.
+            if let Some(Ok(f) | Err(f)) = &mut found {
+                f.timing.stamps_ns[stage::PLANNER_RECEIVED] = monotonic_ns();
             }
             found
         });
@@ -248,8 +257,12 @@ impl LockstepDriver {
             right_mps,
             ..MotorCommand::default()
         };
+        // The frame's trace and its stamps up to the planner's receive; the stages after
+        // it belong to this command (the frame's own COMMAND_* stamps are the previous
+        // command's).
         cmd.timing.trace_id = self.frame.timing.trace_id;
-        cmd.timing.stamps_ns = self.frame.timing.stamps_ns;
+        cmd.timing.stamps_ns[..=stage::PLANNER_RECEIVED]
+            .copy_from_slice(&self.frame.timing.stamps_ns[..=stage::PLANNER_RECEIVED]);
         cmd.timing.stamps_ns[stage::COMMAND_PUBLISHED] = monotonic_ns();
         let sample = self
             .commands

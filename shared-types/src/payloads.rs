@@ -61,14 +61,23 @@ pub struct TimingHeader {
 
 /// What the robot knows of itself and senses, once per physics step.
 ///
+/// Two timing headers: `timing` is this frame's own (its trace id, FRAME_PUBLISHED, and,
+/// as in v1, COMMAND_RECEIVED and COMMAND_APPLIED of the command that produced the step);
+/// `cause` is the whole timing of that command (the trace id of the frame it answered and
+/// every stamp it gathered, COMMAND_RECEIVED and COMMAND_APPLIED included), so one frame
+/// holds a complete trace of the previous control step. `cause` is all zeros when no
+/// command produced the frame (the first frame, a reset).
+///
 /// The IR readings and the odometry are sampled at the robot's IR rate (64 Hz on an
 /// E-puck), not at the physics step: between two samples a frame repeats the last ones, and
 /// `ir_sample` tells a fresh sample from a repeated one.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::IrFrame.v1")]
+#[type_name("agp::IrFrame.v2")]
 pub struct IrFrame {
     pub timing: TimingHeader,
+    /// The timing of the motor command whose step produced this frame (see above).
+    pub cause: TimingHeader,
     /// The physics step this frame describes (the state after `step` steps since start).
     pub step: u64,
     /// Simulated time, seconds.
@@ -254,7 +263,7 @@ const _: () = {
     use core::mem::{align_of, size_of};
     assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
-    assert!(size_of::<IrFrame>() == 72 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
+    assert!(size_of::<IrFrame>() == 72 * 2 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
     assert!(size_of::<MotorCommand>() == 72 + 32 && align_of::<MotorCommand>() == 8);
     assert!(size_of::<Reset>() == 64 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);

@@ -5,8 +5,9 @@ use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
 use agp_shared_types::{
-    ActiveEpoch, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, WaitOutcome,
-    WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
+    ActiveEpoch, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
+    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested,
+    stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -62,6 +63,7 @@ struct Args {
 }
 
 fn main() {
+    alloc_count::enable_from_env();
     if let Err(e) = run() {
         eprintln!("agp-physics: error: {e:#}");
         std::process::exit(1);
@@ -197,7 +199,15 @@ struct Ahead {
     step: u64,
     epoch: u64,
     wheels: (f64, f64),
-    received_ns: u64,
+    /// The command's timing, COMMAND_RECEIVED stamped.
+    timing: TimingHeader,
+}
+
+/// A command's timing with physics's receive stamped.
+fn received(c: &MotorCommand) -> TimingHeader {
+    let mut t = c.timing;
+    t.stamps_ns[stage::COMMAND_RECEIVED] = monotonic_ns();
+    t
 }
 
 /// The latest active epoch the supervisor published, or `current` when none is pending.
@@ -228,8 +238,11 @@ fn pose(p: Pose2) -> Pose {
 }
 
 impl Runner {
-    /// Publishes the frame and ground truth of the current step.
-    fn publish(&mut self, applied_ns: u64, command_received_ns: u64) -> Result<()> {
+    /// Publishes the frame and ground truth of the current step. `cause` is the timing of
+    /// the command that produced the step, COMMAND_RECEIVED and COMMAND_APPLIED stamped
+    /// (zeros when none did: the first frame, a reset); `applied_ns` is when the step was
+    /// taken (in realtime also without a command).
+    fn publish(&mut self, applied_ns: u64, cause: TimingHeader) -> Result<()> {
         let s = self.sim.sensors();
         let step = self.sim.step_count();
         let mut frame = IrFrame {
@@ -242,10 +255,11 @@ impl Runner {
             fix: pose2(s.fix),
             reset_seq: self.reset_seq,
             active_epoch: self.active_epoch,
+            cause,
             ..IrFrame::default()
         };
         frame.timing.trace_id = self.trace_base.wrapping_add(step);
-        frame.timing.stamps_ns[stage::COMMAND_RECEIVED] = command_received_ns;
+        frame.timing.stamps_ns[stage::COMMAND_RECEIVED] = cause.stamps_ns[stage::COMMAND_RECEIVED];
         frame.timing.stamps_ns[stage::COMMAND_APPLIED] = applied_ns;
         let truth = GroundTruth {
             step,
@@ -255,6 +269,7 @@ impl Runner {
             contact: self.sim.in_contact() as u8,
             _pad: [0; 7],
         };
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         // Ground truth first: a reader woken by the frame then finds the truth of that step.
         let sample = self
             .ports
@@ -309,6 +324,18 @@ impl Runner {
     }
 
     fn lockstep(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
+        let mut counter = alloc_count::StepCounter::new();
+        let result = self.lockstep_loop(waiter, idle_timeout_s, &mut counter);
+        counter.report();
+        result
+    }
+
+    fn lockstep_loop(
+        &mut self,
+        waiter: &Waiter,
+        idle_timeout_s: u64,
+        counter: &mut alloc_count::StepCounter,
+    ) -> Result<()> {
         let idle_limit = (idle_timeout_s > 0).then(|| Duration::from_secs(idle_timeout_s));
         // A subscriber that connects while physics waits gets the latest frame from history
         // only when the publisher updates its connections: do so at this period while idle.
@@ -317,7 +344,7 @@ impl Runner {
         // A command of a newer epoch than the active one, for the step it names: kept until
         // its epoch becomes active (a hot swap's flip), or dropped when the step passes.
         let mut ahead: Option<Ahead> = None;
-        self.publish(0, 0)?;
+        self.publish(0, TimingHeader::default())?;
         loop {
             let step = self.sim.step_count();
             let mut epoch = self.active_epoch;
@@ -327,6 +354,9 @@ impl Runner {
                 let resets = &self.ports.resets;
                 let epochs = &self.ports.epochs;
                 let ahead = &mut ahead;
+                // Every call in the wait is iceoryx2's (polls and the block); the closure
+                // itself only compares and copies.
+                let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
                 waiter.wait_for(slice, || {
                     epoch = latest_epoch(epochs, epoch);
                     if resets.has_samples().unwrap_or(false) {
@@ -343,14 +373,14 @@ impl Runner {
                             epoch = latest_epoch(epochs, epoch);
                         }
                         if c.epoch == epoch {
-                            return Some(Some((c.left_mps, c.right_mps, monotonic_ns())));
+                            return Some(Some((c.left_mps, c.right_mps, received(&c))));
                         }
                         if c.epoch > epoch {
                             *ahead = Some(Ahead {
                                 step,
                                 epoch: c.epoch,
                                 wheels: (c.left_mps, c.right_mps),
-                                received_ns: monotonic_ns(),
+                                timing: received(&c),
                             });
                         }
                         // Otherwise a command of a retired planner: dropped.
@@ -358,7 +388,7 @@ impl Runner {
                     match *ahead {
                         Some(a) if a.step == step && a.epoch == epoch => {
                             *ahead = None;
-                            Some(Some((a.wheels.0, a.wheels.1, a.received_ns)))
+                            Some(Some((a.wheels.0, a.wheels.1, a.timing)))
                         }
                         _ => None,
                     }
@@ -371,6 +401,7 @@ impl Runner {
                     if idle_limit.is_some_and(|limit| idle_since.elapsed() > limit) {
                         bail!("no motor command for step {step} within {idle_timeout_s} s");
                     }
+                    let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
                     self.update_connections()?;
                     continue;
                 }
@@ -378,20 +409,26 @@ impl Runner {
                     idle_since = Instant::now();
                     reset = self.apply_resets()?;
                 }
-                WaitOutcome::Ready(Some((l, r, received))) => {
+                WaitOutcome::Ready(Some((l, r, mut cause))) => {
                     idle_since = Instant::now();
                     if let Some(log) = &mut self.step_log {
                         use std::io::Write;
                         writeln!(log, "{step} {}", self.active_epoch)
                             .context("cannot write the step log")?;
                     }
-                    self.sim.step(l, r);
-                    self.publish(monotonic_ns(), received)?;
+                    {
+                        let _in_simulation = alloc_count::enter(alloc_count::Region::Simulation);
+                        self.sim.step(l, r);
+                    }
+                    let applied = monotonic_ns();
+                    cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
+                    self.publish(applied, cause)?;
+                    counter.step_done();
                 }
             }
             if reset {
                 // The same step again, with the world as the reset put it.
-                self.publish(0, 0)?;
+                self.publish(0, TimingHeader::default())?;
             }
         }
     }
@@ -414,13 +451,13 @@ impl Runner {
         let mut wheels = (0.0, 0.0);
         let mut last_command = Instant::now() - watchdog;
         let mut next = Instant::now();
-        self.publish(0, 0)?;
+        self.publish(0, TimingHeader::default())?;
         while !shutdown_requested() {
             if self.apply_resets()? {
                 wheels = (0.0, 0.0);
             }
             self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
-            let mut received = 0;
+            let mut cause = TimingHeader::default();
             while let Some(c) = self
                 .ports
                 .commands
@@ -433,7 +470,7 @@ impl Runner {
                 if c.epoch == self.active_epoch {
                     wheels = (c.left_mps, c.right_mps);
                     last_command = Instant::now();
-                    received = monotonic_ns();
+                    cause = received(&c);
                 }
             }
             if last_command.elapsed() > watchdog {
@@ -441,7 +478,11 @@ impl Runner {
                 wheels = (0.0, 0.0);
             }
             self.sim.step(wheels.0, wheels.1);
-            self.publish(monotonic_ns(), received)?;
+            let applied = monotonic_ns();
+            if cause.trace_id != 0 {
+                cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
+            }
+            self.publish(applied, cause)?;
             next += period;
             let now = Instant::now();
             if next > now {
@@ -454,5 +495,172 @@ impl Runner {
             }
         }
         Ok(())
+    }
+}
+
+mod alloc_count {
+    //! A counting global allocator, the proof that the lockstep loop allocates nothing per
+    //! step.
+    //!
+    //! Off unless `AGP_COUNT_ALLOCS=1`: then every heap allocation (`alloc`, `alloc_zeroed`,
+    //! `realloc`) is counted, split by where it happened: inside a call into iceoryx2
+    //! ([`Region::Iceoryx2`]), inside the simulation library `agp_physics` and rapier
+    //! ([`Region::Simulation`]), or anywhere else in this binary's loop ([`Region::Loop`]).
+    //! After the first [`WARMUP_STEPS`] applied steps the counts are snapshotted, and at
+    //! exit physics prints to stderr, on one line:
+    //!
+    //! `agp-physics: steady-state heap allocations: loop L, simulation S, iceoryx2 I, over N steps after W warm-up steps`
+    //!
+    //! counting up to the end of the last applied step only (what shutdown allocates is not
+    //! a step's). iceoryx2 0.10 allocates one `Rc` per loaned sample
+    //! (`ChunkMutSharedState::new` in `Publisher::loan_uninit`, which `send_copy` also goes
+    //! through); physics loans two per step (ground truth and frame), so I is about 2 N.
+
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+    /// Applied steps before the counting starts: room for lazy first-use allocations.
+    pub const WARMUP_STEPS: u64 = 500;
+
+    /// The environment variable that turns counting on.
+    pub const ENV: &str = "AGP_COUNT_ALLOCS";
+
+    /// Where an allocation happened.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Region {
+        Loop = 0,
+        Simulation = 1,
+        Iceoryx2 = 2,
+    }
+
+    static ENABLED: AtomicBool = AtomicBool::new(false);
+    static COUNTS: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
+
+    thread_local! {
+        /// The region this thread is in.
+        static REGION: Cell<Region> = const { Cell::new(Region::Loop) };
+    }
+
+    struct Counting;
+
+    impl Counting {
+        #[inline]
+        fn count(&self) {
+            if ENABLED.load(Ordering::Relaxed) {
+                let region = REGION.try_with(Cell::get).unwrap_or(Region::Loop);
+                COUNTS[region as usize].fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    // SAFETY: every call is forwarded unchanged to the system allocator; counting touches
+    // only atomics and a const-initialised thread-local, neither of which allocates.
+    unsafe impl GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            self.count();
+            // SAFETY: forwarded with the caller's guarantees.
+            unsafe { System.alloc(layout) }
+        }
+
+        unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+            self.count();
+            // SAFETY: forwarded with the caller's guarantees.
+            unsafe { System.alloc_zeroed(layout) }
+        }
+
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            // SAFETY: forwarded with the caller's guarantees.
+            unsafe { System.dealloc(ptr, layout) }
+        }
+
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            self.count();
+            // SAFETY: forwarded with the caller's guarantees.
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    #[global_allocator]
+    static GLOBAL: Counting = Counting;
+
+    /// Turns counting on when `AGP_COUNT_ALLOCS=1`.
+    pub fn enable_from_env() {
+        if std::env::var(ENV).is_ok_and(|v| v == "1") {
+            ENABLED.store(true, Ordering::Relaxed);
+        }
+    }
+
+    fn counts() -> [u64; 3] {
+        [0, 1, 2].map(|i| COUNTS[i].load(Ordering::Relaxed))
+    }
+
+    /// Counts what is allocated in `region` until the guard is dropped.
+    #[inline]
+    pub fn enter(region: Region) -> RegionGuard {
+        RegionGuard {
+            before: REGION.with(|c| c.replace(region)),
+        }
+    }
+
+    /// Puts the region back as it was when dropped.
+    pub struct RegionGuard {
+        before: Region,
+    }
+
+    impl Drop for RegionGuard {
+        #[inline]
+        fn drop(&mut self) {
+            REGION.with(|c| c.set(self.before));
+        }
+    }
+
+    /// The steady-state counts of one lockstep run.
+    pub struct StepCounter {
+        steps: u64,
+        /// Counts at the end of the warm-up.
+        base: [u64; 3],
+        /// Counts at the end of the last applied step.
+        last: [u64; 3],
+    }
+
+    impl StepCounter {
+        pub fn new() -> Self {
+            Self {
+                steps: 0,
+                base: [0; 3],
+                last: [0; 3],
+            }
+        }
+
+        /// Called after each applied step (its frame published).
+        #[inline]
+        pub fn step_done(&mut self) {
+            if !ENABLED.load(Ordering::Relaxed) {
+                return;
+            }
+            self.steps += 1;
+            if self.steps == WARMUP_STEPS {
+                self.base = counts();
+                self.last = self.base;
+            } else if self.steps > WARMUP_STEPS {
+                self.last = counts();
+            }
+        }
+
+        /// Prints the steady-state counts to stderr, when counting.
+        pub fn report(&self) {
+            if !ENABLED.load(Ordering::Relaxed) {
+                return;
+            }
+            let counted = self.steps.saturating_sub(WARMUP_STEPS);
+            let d = |r: Region| self.last[r as usize] - self.base[r as usize];
+            eprintln!(
+                "agp-physics: steady-state heap allocations: loop {}, simulation {}, iceoryx2 {}, over {counted} steps after {WARMUP_STEPS} warm-up steps",
+                d(Region::Loop),
+                d(Region::Simulation),
+                d(Region::Iceoryx2),
+            );
+        }
     }
 }

@@ -5,6 +5,7 @@ mod control;
 mod control_plane;
 mod instance_lock;
 mod probe;
+mod profile;
 mod rates;
 mod signals;
 mod up;
@@ -47,6 +48,14 @@ enum Cmd {
     /// planner author. A build that does not become ready is rolled back, and the watch
     /// goes on.
     Swap(SwapArgs),
+    /// Measure where the time of a control step goes on a running instance: each hop, each
+    /// stage and end to end (IR frame published -> the motor command it caused applied),
+    /// beside the floor of a bare iceoryx2 ping-pong with the same waiting strategy.
+    ///
+    /// Example: agp profile --seconds 5 --json profile.json --plot profile.svg
+    Profile(profile::ProfileArgs),
+    #[command(name = "profile-floor-pong", hide = true)]
+    ProfileFloorPong(profile::FloorPongArgs),
     /// Measure what the simulated world does.
     Probe {
         #[command(subcommand)]
@@ -162,6 +171,8 @@ fn main() -> ExitCode {
         Cmd::Status(args) => status(args),
         Cmd::Down(args) => down(args),
         Cmd::Swap(args) => swap(args),
+        Cmd::Profile(args) => profile::run(args),
+        Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
         Cmd::Bench {
             what: BenchCmd::Learn(args),
         } => bench_learn::run(args).map(|_| 0),

@@ -1,0 +1,1003 @@
+//! `agp profile`: latency of each hop and stage of a running instance, and the floor.
+//!
+//! The profiler attaches to a running instance with one more IR frame subscriber. Every
+//! frame carries, besides its own timing, the whole timing of the motor command that
+//! produced it (`IrFrame::cause`): the frame that command answered was published, the
+//! planner received it, published the command, physics received and applied it. So one
+//! frame is one complete control step, and the profiler needs no other topic.
+//!
+//! It samples instead of following every frame: about every millisecond it wakes, takes
+//! what its subscriber's buffer holds (the latest few frames; older ones were overwritten)
+//! and sleeps again. It never spins, so on two cores it leaves the pipeline its cores, and
+//! the figures are those of the pipeline as it runs without a profiler, less the cost of
+//! delivering each frame to one more subscriber.
+//!
+//! After the sampling, it measures the floor: a bare iceoryx2 ping-pong between `agp` and
+//! a copy of itself (`agp profile-floor-pong`), waiting as the pipeline waits (`AGP_WAIT`,
+//! [`WaitStrategy::from_env`]) and notifying after every send as the pipeline does. While
+//! the floor runs, the instance's processes are paused (SIGSTOP, then SIGCONT, also on an
+//! error or Ctrl-C), so the floor has the machine as the pipeline had it: on two cores a
+//! running pipeline would otherwise compete with the floor it is compared to. A lockstep
+//! pipeline loses nothing by the pause. `--no-pause` keeps the pipeline running instead.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use agp_shared_types::{
+    Instance, IrFrame, TimingHeader, WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler,
+    monotonic_ns, shutdown_requested, stage,
+};
+use anyhow::{Context, Result, anyhow, bail};
+use hdrhistogram::Histogram;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+
+use crate::control;
+
+/// The hidden subcommand `agp profile` re-executes `agp` with for the floor's pong side.
+pub const FLOOR_PONG_SUBCOMMAND: &str = "profile-floor-pong";
+
+/// Measure where the time of a control step goes on a running instance: each hop and
+/// stage, end to end, and the floor (a bare iceoryx2 hop waiting the same way).
+#[derive(Debug, clap::Args)]
+pub struct ProfileArgs {
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    pub instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    pub launch: PathBuf,
+    /// How long to sample the pipeline, seconds.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// How long to run the floor after the sampling, seconds.
+    #[arg(long, default_value_t = 1.0)]
+    pub floor_seconds: f64,
+    /// Also write the figures as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Also plot the latency histograms (each hop, end to end, the floor) as SVG here.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+    /// Keep the pipeline running while the floor runs (by default its processes are paused
+    /// for that second, so the floor does not compete with them for the cores).
+    #[arg(long)]
+    pub no_pause: bool,
+}
+
+/// The pong side of the floor (run by `agp profile`, not by hand).
+#[derive(Debug, clap::Args)]
+pub struct FloorPongArgs {
+    /// The floor's private instance.
+    #[arg(long)]
+    pub instance: String,
+}
+
+/// How often the profiler looks at its subscriber.
+const POLL_PERIOD: Duration = Duration::from_millis(1);
+
+/// Round trips of the floor before it records.
+const FLOOR_WARMUP: u64 = 200;
+
+/// The longest wait for one message of the floor, or for its pong side to come up.
+const FLOOR_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// A span between two stamps of a control step.
+#[derive(Debug, Clone, Copy)]
+enum Stamp {
+    /// A stamp of the frame's own timing.
+    Frame(usize),
+    /// A stamp of the frame's cause (the command that produced it).
+    Cause(usize),
+}
+
+impl Stamp {
+    fn of(self, f: &IrFrame) -> u64 {
+        match self {
+            Self::Frame(i) => f.timing.stamps_ns[i],
+            Self::Cause(i) => f.cause.stamps_ns[i],
+        }
+    }
+}
+
+/// Which table a row belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Group {
+    Hop,
+    Stage,
+    EndToEnd,
+}
+
+/// One measured span.
+struct Row {
+    name: &'static str,
+    group: Group,
+    from: Stamp,
+    to: Stamp,
+    histogram: Histogram<u64>,
+    /// Frames whose stamps for this span were missing or out of order.
+    missing: u64,
+}
+
+fn histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 60_000_000_000, 3)
+        .expect("constant bounds 1 ns..60 s at 3 digits are valid")
+}
+
+fn rows() -> Vec<Row> {
+    use Stamp::{Cause, Frame};
+    use stage::*;
+    let row = |name, group, from, to| Row {
+        name,
+        group,
+        from,
+        to,
+        histogram: histogram(),
+        missing: 0,
+    };
+    vec![
+        row(
+            "physics->planner",
+            Group::Hop,
+            Cause(FRAME_PUBLISHED),
+            Cause(PLANNER_RECEIVED),
+        ),
+        row(
+            "planner->physics",
+            Group::Hop,
+            Cause(COMMAND_PUBLISHED),
+            Cause(COMMAND_RECEIVED),
+        ),
+        row(
+            "planner",
+            Group::Stage,
+            Cause(PLANNER_RECEIVED),
+            Cause(COMMAND_PUBLISHED),
+        ),
+        row(
+            "physics.step",
+            Group::Stage,
+            Cause(COMMAND_RECEIVED),
+            Cause(COMMAND_APPLIED),
+        ),
+        row(
+            "physics.publish",
+            Group::Stage,
+            Cause(COMMAND_APPLIED),
+            Frame(FRAME_PUBLISHED),
+        ),
+        row(
+            "end_to_end",
+            Group::EndToEnd,
+            Cause(FRAME_PUBLISHED),
+            Cause(COMMAND_APPLIED),
+        ),
+    ]
+}
+
+/// The figures of one row.
+#[derive(Debug, Clone)]
+struct Figures {
+    name: String,
+    samples: u64,
+    p50_ns: u64,
+    p90_ns: u64,
+    p99_ns: u64,
+    p999_ns: u64,
+    max_ns: u64,
+}
+
+impl Figures {
+    fn new(name: &str, h: &Histogram<u64>) -> Self {
+        Self {
+            name: name.to_owned(),
+            samples: h.len(),
+            p50_ns: h.value_at_quantile(0.50),
+            p90_ns: h.value_at_quantile(0.90),
+            p99_ns: h.value_at_quantile(0.99),
+            p999_ns: h.value_at_quantile(0.999),
+            max_ns: h.max(),
+        }
+    }
+
+    fn ratio(&self, floor: &Figures) -> Option<f64> {
+        (floor.p50_ns > 0 && self.samples > 0).then(|| self.p50_ns as f64 / floor.p50_ns as f64)
+    }
+
+    fn to_json(&self, floor: &Figures) -> serde_json::Value {
+        serde_json::json!({
+            "name": self.name,
+            "samples": self.samples,
+            "p50_ns": self.p50_ns,
+            "p90_ns": self.p90_ns,
+            "p99_ns": self.p99_ns,
+            "p999_ns": self.p999_ns,
+            "max_ns": self.max_ns,
+            "ratio_to_floor_p50": self.ratio(floor),
+        })
+    }
+}
+
+/// What the sampling saw.
+struct Sampling {
+    rows: Vec<Row>,
+    /// Frames taken from the subscriber.
+    frames: u64,
+    /// Frames with no cause (the first frame, a reset's frame).
+    uncaused: u64,
+    /// Wake-ups of the profiler.
+    polls: u64,
+    /// Physics steps between the first and the last frame taken, and the time between
+    /// their publications (summed over runs of physics, if it restarted).
+    steps: u64,
+    span_ns: u64,
+    elapsed: Duration,
+}
+
+impl Sampling {
+    fn steps_per_s(&self) -> Option<f64> {
+        (self.span_ns > 0).then(|| self.steps as f64 / (self.span_ns as f64 * 1e-9))
+    }
+}
+
+/// The trace base of a frame: one per run of physics.
+fn run_of(f: &IrFrame) -> u64 {
+    f.timing.trace_id.wrapping_sub(f.step)
+}
+
+fn sample_pipeline(instance: &Instance, seconds: f64) -> Result<Sampling> {
+    let node = instance
+        .node(&format!("agp-profile-{}", std::process::id()), false)
+        .map_err(|e| anyhow!("cannot create an iceoryx2 node: {e:?}"))?;
+    let frames = instance
+        .ir_frames(&node)
+        .context("cannot open the IR frames")?;
+    let subscriber = frames
+        .data
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow!("cannot subscribe to the IR frames: {e:?}"))?;
+    let mut s = Sampling {
+        rows: rows(),
+        frames: 0,
+        uncaused: 0,
+        polls: 0,
+        steps: 0,
+        span_ns: 0,
+        elapsed: Duration::ZERO,
+    };
+    let mut last: Option<IrFrame> = None;
+    let duration = Duration::from_secs_f64(seconds);
+    let start = Instant::now();
+    while start.elapsed() < duration && !shutdown_requested() {
+        s.polls += 1;
+        while let Some(sample) = subscriber
+            .receive()
+            .map_err(|e| anyhow!("cannot receive an IR frame: {e:?}"))?
+        {
+            let f = *sample.payload();
+            drop(sample);
+            s.frames += 1;
+            if let Some(prev) = &last
+                && run_of(prev) == run_of(&f)
+                && f.step >= prev.step
+            {
+                let (a, b) = (
+                    prev.timing.stamps_ns[stage::FRAME_PUBLISHED],
+                    f.timing.stamps_ns[stage::FRAME_PUBLISHED],
+                );
+                if b > a {
+                    s.steps += f.step - prev.step;
+                    s.span_ns += b - a;
+                }
+            }
+            last = Some(f);
+            if f.cause.trace_id == 0 {
+                s.uncaused += 1;
+                continue;
+            }
+            for row in &mut s.rows {
+                let (a, b) = (row.from.of(&f), row.to.of(&f));
+                if a == 0 || b == 0 || b < a {
+                    row.missing += 1;
+                } else {
+                    row.histogram.saturating_record(b - a);
+                }
+            }
+        }
+        std::thread::sleep(POLL_PERIOD);
+    }
+    s.elapsed = start.elapsed();
+    Ok(s)
+}
+
+/// The floor's message: a sequence number (`trace_id`) and the ping's send stamp
+/// (`stamps_ns[0]`), in the pipeline's own timing header.
+type FloorMessage = TimingHeader;
+
+const FLOOR_READY: u64 = u64::MAX - 1;
+const FLOOR_STOP: u64 = u64::MAX;
+
+type FloorTopic = publish_subscribe::PortFactory<ipc::Service, FloorMessage, ()>;
+type FloorEvents = event::PortFactory<ipc::Service>;
+
+/// One side's ports of the floor.
+struct FloorPorts {
+    publisher: Publisher<ipc::Service, FloorMessage, ()>,
+    subscriber: Subscriber<ipc::Service, FloorMessage, ()>,
+    notifier: Notifier<ipc::Service>,
+    waiter: Waiter,
+    _services: (FloorTopic, FloorTopic, FloorEvents, FloorEvents),
+}
+
+impl FloorPorts {
+    fn open(node: &Node<ipc::Service>, ping_side: bool) -> Result<Self> {
+        let topic =
+            |name: &str| -> Result<publish_subscribe::PortFactory<ipc::Service, FloorMessage, ()>> {
+                let service: ServiceName = name
+                    .try_into()
+                    .map_err(|e| anyhow!("bad service name `{name}`: {e:?}"))?;
+                node.service_builder(&service)
+                    .publish_subscribe::<FloorMessage>()
+                    .history_size(0)
+                    .subscriber_max_buffer_size(4)
+                    .max_publishers(2)
+                    .max_subscribers(2)
+                    .open_or_create()
+                    .map_err(|e| anyhow!("cannot open `{name}`: {e:?}"))
+            };
+        let events = |name: &str| -> Result<FloorEvents> {
+            let service: ServiceName = name
+                .try_into()
+                .map_err(|e| anyhow!("bad service name `{name}`: {e:?}"))?;
+            node.service_builder(&service)
+                .event()
+                .max_notifiers(2)
+                .max_listeners(2)
+                .open_or_create()
+                .map_err(|e| anyhow!("cannot open `{name}`: {e:?}"))
+        };
+        let ping = topic("floor/ping")?;
+        let pong = topic("floor/pong")?;
+        let ping_ev = events("floor/ping.ev")?;
+        let pong_ev = events("floor/pong.ev")?;
+        let (out, inp, out_ev, in_ev) = if ping_side {
+            (&ping, &pong, &ping_ev, &pong_ev)
+        } else {
+            (&pong, &ping, &pong_ev, &ping_ev)
+        };
+        let listener: Listener<ipc::Service> = in_ev
+            .listener_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot create the floor's listener: {e:?}"))?;
+        Ok(Self {
+            publisher: out
+                .publisher_builder()
+                .create()
+                .map_err(|e| anyhow!("cannot create the floor's publisher: {e:?}"))?,
+            subscriber: inp
+                .subscriber_builder()
+                .create()
+                .map_err(|e| anyhow!("cannot create the floor's subscriber: {e:?}"))?,
+            notifier: out_ev
+                .notifier_builder()
+                .create()
+                .map_err(|e| anyhow!("cannot create the floor's notifier: {e:?}"))?,
+            waiter: Waiter::new(listener, WaitStrategy::from_env()),
+            _services: (ping, pong, ping_ev, pong_ev),
+        })
+    }
+
+    /// Sends one message and notifies, as every pipeline publisher does.
+    fn send(&self, seq: u64, stamp_ns: u64) -> Result<()> {
+        let mut m = FloorMessage {
+            trace_id: seq,
+            ..FloorMessage::default()
+        };
+        m.stamps_ns[0] = stamp_ns;
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| anyhow!("floor: cannot loan a sample: {e:?}"))?;
+        sample
+            .write_payload(m)
+            .send()
+            .map_err(|e| anyhow!("floor: cannot send: {e:?}"))?;
+        let _ = self.notifier.notify();
+        Ok(())
+    }
+
+    /// The next message: `(seq, stamp_ns)`.
+    fn next(&self) -> Result<(u64, u64)> {
+        let subscriber = &self.subscriber;
+        match self.waiter.wait_for(FLOOR_TIMEOUT, || {
+            subscriber
+                .receive()
+                .ok()
+                .flatten()
+                .map(|s| (s.payload().trace_id, s.payload().stamps_ns[0]))
+        }) {
+            WaitOutcome::Ready(m) => Ok(m),
+            WaitOutcome::TimedOut => bail!("floor: no answer within {FLOOR_TIMEOUT:?}"),
+            WaitOutcome::Shutdown => bail!("floor: interrupted"),
+        }
+    }
+}
+
+/// The floor's result.
+struct Floor {
+    histogram: Histogram<u64>,
+    round_trips: u64,
+}
+
+/// The processes of an instance, paused (SIGSTOP to each one's process group) until
+/// dropped (SIGCONT).
+struct Paused {
+    pids: Vec<libc::pid_t>,
+}
+
+impl Paused {
+    /// Pauses every running process of instance `name`, as its supervisor lists them.
+    fn pipeline(name: &str) -> Result<Self> {
+        let r = control::ask(name, agp_shared_types::ControlKind::Status)?;
+        let report = control::StatusReport::new(name, &r);
+        let mut paused = Self { pids: Vec::new() };
+        for p in &report.processes {
+            let Some(pid) = p.pid.and_then(|pid| libc::pid_t::try_from(pid).ok()) else {
+                continue;
+            };
+            if p.state != "running" {
+                continue;
+            }
+            // Each child leads a process group of its own (`agp up`): pause the group, or
+            // the process alone if it leads none.
+            for target in [-pid, pid] {
+                // SAFETY: kill(2) of a pid the supervisor reported; no memory is involved.
+                if unsafe { libc::kill(target, libc::SIGSTOP) } == 0 {
+                    paused.pids.push(target);
+                    break;
+                }
+            }
+        }
+        Ok(paused)
+    }
+}
+
+impl Drop for Paused {
+    fn drop(&mut self) {
+        for &pid in &self.pids {
+            // SAFETY: kill(2) of a pid this guard stopped.
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+        }
+    }
+}
+
+/// The ping side: starts the pong side, measures for `seconds`, stops it, removes the
+/// floor's files.
+fn run_floor(seconds: f64) -> Result<Floor> {
+    let name = format!("pfloor-{}", std::process::id());
+    let instance =
+        Instance::new(&name).map_err(|e| anyhow!("bad floor instance name `{name}`: {e}"))?;
+    let _ = instance.remove_files();
+    let result = (|| {
+        let node = instance
+            .node("floor-ping", false)
+            .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
+        let ports = FloorPorts::open(&node, true)?;
+        let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+        let child = Command::new(exe)
+            .args([FLOOR_PONG_SUBCOMMAND, "--instance", &name])
+            .stdin(Stdio::null())
+            .spawn()
+            .context("cannot start the floor's pong side")?;
+        let mut child = KillOnDrop(child);
+        let floor = ping(&ports, seconds);
+        // Stop the pong side however the ping ended; it also times out on its own.
+        let _ = ports.send(FLOOR_STOP, 0);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while child.0.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        drop(child);
+        drop(ports);
+        drop(node);
+        floor
+    })();
+    let _ = instance.remove_files();
+    result
+}
+
+/// Kills and reaps the child if it is still running when dropped.
+struct KillOnDrop(Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        if self.0.try_wait().ok().flatten().is_none() {
+            let _ = self.0.kill();
+        }
+        let _ = self.0.wait();
+    }
+}
+
+fn ping(ports: &FloorPorts, seconds: f64) -> Result<Floor> {
+    while ports.next()?.0 != FLOOR_READY {}
+    let mut h = histogram();
+    let duration = Duration::from_secs_f64(seconds);
+    let start = Instant::now();
+    let mut seq = 0u64;
+    while seq < FLOOR_WARMUP || start.elapsed() < duration {
+        if shutdown_requested() {
+            bail!("floor: interrupted");
+        }
+        ports.send(seq, monotonic_ns())?;
+        let rtt = loop {
+            let (s, stamp) = ports.next()?;
+            if s == seq {
+                break monotonic_ns().saturating_sub(stamp);
+            }
+        };
+        if seq >= FLOOR_WARMUP {
+            h.saturating_record(rtt / 2);
+        }
+        seq += 1;
+    }
+    Ok(Floor {
+        round_trips: h.len(),
+        histogram: h,
+    })
+}
+
+/// `agp profile-floor-pong`: echoes the floor's pings until told to stop.
+pub fn run_floor_pong(args: &FloorPongArgs) -> Result<u8> {
+    install_shutdown_handler();
+    let instance = Instance::new(&args.instance)
+        .map_err(|e| anyhow!("bad instance name `{}`: {e}", args.instance))?;
+    let node = instance
+        .node("floor-pong", false)
+        .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
+    let ports = FloorPorts::open(&node, false)?;
+    ports.send(FLOOR_READY, monotonic_ns())?;
+    loop {
+        let (seq, stamp) = ports.next()?;
+        if seq == FLOOR_STOP {
+            return Ok(0);
+        }
+        if seq == FLOOR_READY {
+            continue;
+        }
+        ports.send(seq, stamp)?;
+    }
+}
+
+/// The machine's 1, 5 and 15 minute load averages.
+fn load_average() -> Option<[f64; 3]> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut it = text.split_whitespace().map(|v| v.parse::<f64>().ok());
+    Some([it.next()??, it.next()??, it.next()??])
+}
+
+/// `agp profile`.
+pub fn run(args: &ProfileArgs) -> Result<u8> {
+    if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
+        bail!("--seconds must be between 0 and 3600, got {}", args.seconds);
+    }
+    if !(args.floor_seconds.is_finite() && args.floor_seconds > 0.0 && args.floor_seconds <= 600.0)
+    {
+        bail!(
+            "--floor-seconds must be between 0 and 600, got {}",
+            args.floor_seconds
+        );
+    }
+    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let instance = Instance::new(&name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    if !control::is_up(&instance) {
+        bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");
+    }
+    install_shutdown_handler();
+    let waiting = WaitStrategy::from_env();
+    let sampling = sample_pipeline(&instance, args.seconds)?;
+    if shutdown_requested() {
+        bail!("interrupted");
+    }
+    if sampling.frames == 0 {
+        bail!(
+            "no IR frame of instance `{name}` arrived in {:.1} s: is physics running?",
+            sampling.elapsed.as_secs_f64()
+        );
+    }
+    if sampling.frames == sampling.uncaused {
+        bail!(
+            "no control step of instance `{name}` was sampled in {:.1} s ({} frames, none made by a motor command): is a planner driving physics?",
+            sampling.elapsed.as_secs_f64(),
+            sampling.frames
+        );
+    }
+    let floor = {
+        let paused = if args.no_pause {
+            None
+        } else {
+            Some(Paused::pipeline(&name).context("cannot pause the pipeline for the floor")?)
+        };
+        let floor = run_floor(args.floor_seconds).context("the floor failed");
+        let paused_processes = paused.as_ref().map(|p| p.pids.len());
+        drop(paused);
+        (floor?, paused_processes)
+    };
+    let (floor, paused) = floor;
+    let load = load_average();
+    let report = Report {
+        instance: name,
+        waiting: waiting.name(),
+        sampling,
+        floor_figures: Figures::new("floor", &floor.histogram),
+        floor,
+        floor_seconds: args.floor_seconds,
+        paused,
+        load,
+    };
+    report.print();
+    if let Some(path) = &args.json {
+        let text =
+            serde_json::to_string_pretty(&report.to_json()).context("cannot encode the JSON")?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(path) = &args.plot {
+        report.plot(path)?;
+    }
+    Ok(0)
+}
+
+struct Report {
+    instance: String,
+    waiting: String,
+    sampling: Sampling,
+    floor: Floor,
+    floor_figures: Figures,
+    floor_seconds: f64,
+    /// How many processes were paused while the floor ran (`None`: `--no-pause`).
+    paused: Option<usize>,
+    load: Option<[f64; 3]>,
+}
+
+impl Report {
+    fn figures(&self, group: Group) -> Vec<Figures> {
+        self.sampling
+            .rows
+            .iter()
+            .filter(|r| r.group == group)
+            .map(|r| Figures::new(r.name, &r.histogram))
+            .collect()
+    }
+
+    fn caused(&self) -> u64 {
+        self.sampling.frames - self.sampling.uncaused
+    }
+
+    fn print(&self) {
+        let s = &self.sampling;
+        let load = self.load.map_or("unknown".to_owned(), |l| {
+            format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2])
+        });
+        println!(
+            "agp profile: instance `{}`, waiting `{}`, load average {load} (1, 5, 15 min), {} cores",
+            self.instance,
+            self.waiting,
+            std::thread::available_parallelism().map_or(0, |n| n.get())
+        );
+        println!(
+            "  sampled {} control steps ({} frames taken, {} without a cause) in {:.1} s: {} wake-ups about every {} ms, each taking what the subscriber's buffer held (no spinning)",
+            self.caused(),
+            s.frames,
+            s.uncaused,
+            s.elapsed.as_secs_f64(),
+            s.polls,
+            POLL_PERIOD.as_millis()
+        );
+        match s.steps_per_s() {
+            Some(r) => println!(
+                "  physics stepped {r:.0} steps/s (so about {:.1} % of the steps were sampled)",
+                100.0 * self.caused() as f64 / (r * s.elapsed.as_secs_f64()).max(1.0)
+            ),
+            None => println!("  physics steps/s: unknown (fewer than two frames of one run)"),
+        }
+        println!(
+            "  floor: bare iceoryx2 ping-pong between two `agp` processes, same waiting, one-way = round trip / 2, {} round trips over {:.1} s after the sampling, {}",
+            self.floor.round_trips,
+            self.floor_seconds,
+            self.floor_when()
+        );
+        println!(
+            "\n  {:<6} {:<18} {:>8} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
+            "", "name", "samples", "p50 us", "p90 us", "p99 us", "p99.9 us", "max us", "p50/floor"
+        );
+        let us = |ns: u64| ns as f64 * 1e-3;
+        let line = |kind: &str, f: &Figures| {
+            println!(
+                "  {:<6} {:<18} {:>8} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>10.2} {:>9}",
+                kind,
+                f.name,
+                f.samples,
+                us(f.p50_ns),
+                us(f.p90_ns),
+                us(f.p99_ns),
+                us(f.p999_ns),
+                us(f.max_ns),
+                f.ratio(&self.floor_figures)
+                    .map_or("-".to_owned(), |r| format!("{r:.1}x"))
+            );
+        };
+        for f in self.figures(Group::Hop) {
+            line("hop", &f);
+        }
+        for f in self.figures(Group::Stage) {
+            line("stage", &f);
+        }
+        for f in self.figures(Group::EndToEnd) {
+            line("e2e", &f);
+        }
+        line("floor", &self.floor_figures);
+        for r in &s.rows {
+            if r.missing > 0 {
+                println!(
+                    "  note: {} sampled steps had no usable stamps for `{}`",
+                    r.missing, r.name
+                );
+            }
+        }
+    }
+
+    fn floor_when(&self) -> String {
+        match self.paused {
+            Some(n) => format!("the pipeline's {n} processes paused meanwhile"),
+            None => "the pipeline running beside it".to_owned(),
+        }
+    }
+
+    fn to_json(&self) -> serde_json::Value {
+        let s = &self.sampling;
+        let floor = &self.floor_figures;
+        let list = |g| {
+            self.figures(g)
+                .iter()
+                .map(|f| f.to_json(floor))
+                .collect::<Vec<_>>()
+        };
+        let end_to_end = self
+            .figures(Group::EndToEnd)
+            .first()
+            .map(|f| f.to_json(floor))
+            .unwrap_or(serde_json::Value::Null);
+        serde_json::json!({
+            "instance": self.instance,
+            "waiting": self.waiting,
+            "hops": list(Group::Hop),
+            "stages": list(Group::Stage),
+            "end_to_end": end_to_end,
+            "floor": floor.to_json(floor),
+            "samples": self.caused(),
+            "sampling": {
+                "method": format!(
+                    "every ~{} ms, the frames the subscriber's buffer held (no spinning)",
+                    POLL_PERIOD.as_millis()
+                ),
+                "seconds": s.elapsed.as_secs_f64(),
+                "wake_ups": s.polls,
+                "frames": s.frames,
+                "frames_without_cause": s.uncaused,
+            },
+            "steps_per_s": s.steps_per_s(),
+            "load_average": self.load,
+            "floor_run": {
+                "round_trips": self.floor.round_trips,
+                "seconds": self.floor_seconds,
+                "when": format!("after the sampling, {}", self.floor_when()),
+                "paused_processes": self.paused,
+                "one_way": "round trip / 2",
+            },
+        })
+    }
+
+    /// Latency histograms of each hop, end to end and the floor, log-scaled x.
+    fn plot(&self, path: &Path) -> Result<()> {
+        let mut series: Vec<(String, &Histogram<u64>)> = self
+            .sampling
+            .rows
+            .iter()
+            .filter(|r| r.group != Group::Stage && !r.histogram.is_empty())
+            .map(|r| (r.name.to_owned(), &r.histogram))
+            .collect();
+        if !self.floor.histogram.is_empty() {
+            series.push(("floor".to_owned(), &self.floor.histogram));
+        }
+        let svg = plot_svg(&series, &self.instance, &self.waiting)?;
+        std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
+    }
+}
+
+/// Buckets per decade of the plot.
+const PLOT_BUCKETS_PER_DECADE: f64 = 20.0;
+
+/// One series of the plot: `(latency us at the bucket's geometric centre, share of the
+/// series' samples in the bucket)`.
+fn buckets(h: &Histogram<u64>, lo_ns: f64, hi_ns: f64) -> Vec<(f64, f64)> {
+    let step = 10f64.powf(1.0 / PLOT_BUCKETS_PER_DECADE);
+    let total = h.len().max(1) as f64;
+    let mut out = Vec::new();
+    let mut a = lo_ns;
+    while a < hi_ns {
+        let b = a * step;
+        let count = h.count_between(a.ceil() as u64, (b.ceil() as u64).saturating_sub(1));
+        out.push(((a * b).sqrt() * 1e-3, count as f64 / total));
+        a = b;
+    }
+    out
+}
+
+fn draw_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("cannot draw the plot: {e:?}")
+}
+
+fn plot_svg(series: &[(String, &Histogram<u64>)], instance: &str, waiting: &str) -> Result<String> {
+    use plotters::prelude::*;
+    const FONT: &str = "sans-serif";
+    let min_ns = series
+        .iter()
+        .map(|(_, h)| h.min())
+        .min()
+        .unwrap_or(100)
+        .max(10) as f64;
+    let max_ns = series
+        .iter()
+        .map(|(_, h)| h.max())
+        .max()
+        .unwrap_or(1000)
+        .max(100) as f64;
+    let lo = 10f64.powf(min_ns.log10().floor());
+    let hi = 10f64.powf((max_ns * 1.01).log10().ceil());
+    let data: Vec<(String, Vec<(f64, f64)>)> = series
+        .iter()
+        .map(|(n, h)| (n.clone(), buckets(h, lo, hi)))
+        .collect();
+    let top = data
+        .iter()
+        .flat_map(|(_, d)| d.iter().map(|p| p.1))
+        .fold(0.0f64, f64::max)
+        .max(1e-3)
+        * 1.1;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("latency of instance `{instance}` (waiting `{waiting}`)"),
+                (FONT, 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((lo * 1e-3..hi * 1e-3).log_scale(), 0.0..top)
+            .map_err(draw_error)?;
+        chart
+            .configure_mesh()
+            .x_desc("latency, us (log scale)")
+            .y_desc("share of samples per bucket")
+            .label_style((FONT, 11))
+            .x_label_formatter(&|v| format!("{v}"))
+            .draw()
+            .map_err(draw_error)?;
+        let palette = [
+            RGBColor(31, 119, 180),
+            RGBColor(255, 127, 14),
+            RGBColor(44, 160, 44),
+            RGBColor(80, 80, 80),
+            RGBColor(214, 39, 40),
+        ];
+        for (k, (name, d)) in data.iter().enumerate() {
+            let colour = palette[k % palette.len()];
+            chart
+                .draw_series(LineSeries::new(d.iter().copied(), colour.stroke_width(2)))
+                .map_err(draw_error)?
+                .label(name.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font((FONT, 12))
+            .draw()
+            .map_err(draw_error)?;
+        root.present().map_err(draw_error)?;
+    }
+    Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_row_reads_the_quantiles_of_a_uniform_histogram_within_its_precision() {
+        // 1..=1000 us, one each: p50 = 500 us, p99 = 990 us, max = 1000 us, within the
+        // histogram's 3 significant digits (0.1 %).
+        let mut h = histogram();
+        for us in 1..=1000u64 {
+            h.record(us * 1000).expect("in bounds");
+        }
+        let f = Figures::new("x", &h);
+        let close = |got: u64, want: u64| (got as f64 - want as f64).abs() <= want as f64 * 1e-3;
+        assert!(close(f.p50_ns, 500_000), "p50 {}", f.p50_ns);
+        assert!(close(f.p90_ns, 900_000), "p90 {}", f.p90_ns);
+        assert!(close(f.p99_ns, 990_000), "p99 {}", f.p99_ns);
+        assert!(close(f.p999_ns, 999_000), "p99.9 {}", f.p999_ns);
+        assert!(close(f.max_ns, 1_000_000), "max {}", f.max_ns);
+    }
+
+    #[test]
+    fn the_spans_of_a_frame_are_read_from_its_cause_and_its_own_stamps() {
+        let mut f = IrFrame::default();
+        f.cause.trace_id = 9;
+        for (i, t) in [
+            (stage::FRAME_PUBLISHED, 100),
+            (stage::PLANNER_RECEIVED, 130),
+            (stage::COMMAND_PUBLISHED, 150),
+            (stage::COMMAND_RECEIVED, 190),
+            (stage::COMMAND_APPLIED, 260),
+        ] {
+            f.cause.stamps_ns[i] = t;
+        }
+        f.timing.stamps_ns[stage::FRAME_PUBLISHED] = 275;
+        let spans: Vec<(&str, u64)> = rows()
+            .iter()
+            .map(|r| (r.name, r.to.of(&f) - r.from.of(&f)))
+            .collect();
+        assert_eq!(
+            spans,
+            [
+                ("physics->planner", 30),
+                ("planner->physics", 40),
+                ("planner", 20),
+                ("physics.step", 70),
+                ("physics.publish", 15),
+                ("end_to_end", 160),
+            ]
+        );
+    }
+
+    #[test]
+    fn the_plot_buckets_of_a_histogram_hold_all_its_samples() {
+        let mut h = histogram();
+        for ns in [150u64, 900, 1_000, 5_000, 80_000] {
+            h.record(ns).expect("in bounds");
+        }
+        let share: f64 = buckets(&h, 100.0, 1e6).iter().map(|b| b.1).sum();
+        assert!((share - 1.0).abs() < 1e-9, "share {share}");
+    }
+
+    #[test]
+    fn a_plot_of_two_series_is_an_svg_naming_both() {
+        let mut a = histogram();
+        let mut b = histogram();
+        for ns in 1_000..2_000u64 {
+            a.record(ns).expect("in bounds");
+            b.record(ns * 3).expect("in bounds");
+        }
+        let svg = plot_svg(
+            &[("hop".to_owned(), &a), ("floor".to_owned(), &b)],
+            "t",
+            "block",
+        )
+        .expect("a plot");
+        assert!(svg.starts_with("<svg"));
+        assert!(svg.contains("hop") && svg.contains("floor"));
+    }
+}

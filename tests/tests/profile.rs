@@ -1,0 +1,269 @@
+//! `agp profile` on a running lockstep instance of real physics and the scripted planner:
+//! every promised figure is there and ordered, the floor ran, and nothing is left behind.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use agp_shared_types::{Instance, LockstepDriver, Pose2, stage};
+use agp_tests::{LaunchDir, bin_path, count_instance_files, run_agp};
+use serde_json::Value;
+
+/// Safety net of every wait; the checks never depend on it.
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Physics and the scripted planner, pushing for longer than the test runs.
+fn launch(instance: &str) -> String {
+    format!(
+        "instance = \"{instance}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
+         args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         ends_run = true\n"
+    )
+}
+
+/// Stops the instance if a failed assertion left it up.
+struct Down<'a> {
+    dir: &'a Path,
+    name: &'a str,
+}
+
+impl Drop for Down<'_> {
+    fn drop(&mut self) {
+        if count_instance_files(self.name) > 0 {
+            let _ = run_agp(self.dir, &["down", "--instance", self.name], TIMEOUT);
+        }
+    }
+}
+
+/// The state letter of process `pid` in /proc (`R`, `S`, `T` for stopped...).
+fn process_state(pid: u64) -> Option<char> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    stat.rsplit_once(')')?
+        .1
+        .split_whitespace()
+        .next()?
+        .chars()
+        .next()
+}
+
+const FIGURES: [&str; 5] = ["p50_ns", "p90_ns", "p99_ns", "p999_ns", "max_ns"];
+
+/// A row holds every figure, as a number, in order, and its ratio to the floor.
+#[track_caller]
+fn assert_row(row: &Value, what: &str) -> u64 {
+    let name = row["name"]
+        .as_str()
+        .unwrap_or_else(|| panic!("{what}: no name in {row}"));
+    let values: Vec<u64> = FIGURES
+        .iter()
+        .map(|k| {
+            row[k]
+                .as_u64()
+                .unwrap_or_else(|| panic!("{what} `{name}`: no `{k}` in {row}"))
+        })
+        .collect();
+    assert!(
+        values.windows(2).all(|w| w[0] <= w[1]),
+        "{what} `{name}`: p50 <= p90 <= p99 <= p999 <= max does not hold: {values:?}"
+    );
+    assert!(values[0] > 0, "{what} `{name}`: p50 is 0: {row}");
+    assert!(
+        row["ratio_to_floor_p50"].as_f64().is_some_and(|r| r > 0.0),
+        "{what} `{name}`: no ratio to the floor in {row}"
+    );
+    values[0]
+}
+
+#[test]
+fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_leaves_no_file() {
+    let name = "t-profile";
+    let dir = LaunchDir::new(&launch(name));
+    let up = run_agp(dir.path(), &["up", "--detach"], TIMEOUT);
+    assert!(up.status.success(), "{}{}", up.stdout, up.stderr);
+    let guard = Down {
+        dir: dir.path(),
+        name,
+    };
+
+    let profile = run_agp(
+        dir.path(),
+        &[
+            "profile",
+            "--seconds",
+            "1",
+            "--json",
+            "out.json",
+            "--plot",
+            "out.svg",
+        ],
+        TIMEOUT,
+    );
+    assert!(
+        profile.status.success(),
+        "agp profile failed: {}{}",
+        profile.stdout,
+        profile.stderr
+    );
+    let text = std::fs::read_to_string(dir.path().join("out.json")).expect("out.json written");
+    let v: Value = serde_json::from_str(&text).expect("out.json is JSON");
+
+    let hops = v["hops"].as_array().expect("`hops` is a list");
+    let hop_names: Vec<&str> = hops.iter().filter_map(|h| h["name"].as_str()).collect();
+    assert_eq!(hop_names, ["physics->planner", "planner->physics"]);
+    let hop_p50: Vec<u64> = hops.iter().map(|h| assert_row(h, "hop")).collect();
+    let stages = v["stages"].as_array().expect("`stages` is a list");
+    let stage_names: Vec<&str> = stages.iter().filter_map(|h| h["name"].as_str()).collect();
+    assert_eq!(stage_names, ["planner", "physics.step", "physics.publish"]);
+    for s in stages {
+        assert_row(s, "stage");
+    }
+    let end_to_end = assert_row(&v["end_to_end"], "end_to_end");
+    assert_row(&v["floor"], "floor");
+    for (name, p50) in hop_names.iter().zip(&hop_p50) {
+        assert!(
+            end_to_end >= *p50,
+            "end to end p50 {end_to_end} ns is below hop `{name}`'s p50 {p50} ns"
+        );
+    }
+    assert!(
+        v["waiting"].as_str().is_some_and(|w| !w.is_empty()),
+        "no waiting strategy in {v}"
+    );
+    assert!(
+        v["samples"].as_u64().is_some_and(|n| n > 0),
+        "no sample in {v}"
+    );
+    assert!(
+        v["floor_run"]["round_trips"]
+            .as_u64()
+            .is_some_and(|n| n > 0),
+        "the floor made no round trip: {v}"
+    );
+    let svg = std::fs::read_to_string(dir.path().join("out.svg")).expect("out.svg written");
+    assert!(svg.starts_with("<svg"), "out.svg is no SVG");
+    for series in [
+        "physics-&gt;planner",
+        "planner-&gt;physics",
+        "end_to_end",
+        "floor",
+    ] {
+        assert!(svg.contains(series), "the plot has no series `{series}`");
+    }
+    // The floor's private instance is gone with it.
+    assert_eq!(count_instance_files(&format!("pfloor-{}", profile.pid)), 0);
+    // The pipeline, paused while the floor ran, runs again: no process is left stopped.
+    let status = run_agp(
+        dir.path(),
+        &["status", "--instance", name, "--json"],
+        TIMEOUT,
+    );
+    assert!(status.status.success(), "{}", status.stderr);
+    let status: Value = serde_json::from_str(&status.stdout).expect("status JSON");
+    for p in status["processes"].as_array().expect("processes") {
+        let pid = p["pid"].as_u64().expect("a running process has a pid");
+        assert_ne!(
+            process_state(pid),
+            Some('T'),
+            "process `{}` is still stopped after the profile",
+            p["name"]
+        );
+    }
+
+    let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    assert!(down.status.success(), "{}", down.stderr);
+    drop(guard);
+    assert_eq!(count_instance_files(name), 0, "files of `{name}` are left");
+}
+
+#[test]
+fn profile_refuses_an_instance_that_is_not_up() {
+    let name = "t-profile-none";
+    let dir = LaunchDir::new(&launch(name));
+    let run = run_agp(
+        dir.path(),
+        &["profile", "--instance", name, "--seconds", "1"],
+        TIMEOUT,
+    );
+    assert!(
+        !run.status.success(),
+        "profile of a stopped instance succeeded"
+    );
+    assert!(
+        run.stderr.contains("is not up"),
+        "unexpected error: {}",
+        run.stderr
+    );
+    assert_eq!(count_instance_files(name), 0);
+}
+
+#[test]
+fn a_frame_carries_the_whole_timing_of_the_command_that_made_it() {
+    let instance = Instance::new(&format!("t-cause-{}", std::process::id())).expect("name");
+    instance.remove_files().expect("clean start");
+    let mut child = Command::new(bin_path("agp-physics"))
+        .env("AGP_INSTANCE", instance.name())
+        .env("AGP_SCENARIO", "square")
+        .env("AGP_CLOCK", "lockstep")
+        .args(["--idle-timeout-s", "60"])
+        .spawn()
+        .expect("start agp-physics");
+    let checked = std::panic::catch_unwind(|| {
+        let mut driver =
+            LockstepDriver::connect(&instance, "test", 0, false, Duration::from_secs(30))
+                .expect("physics answers");
+        let reset = *driver
+            .reset(Pose2::new(0.0, 0.0, 0.0), Pose2::new(-0.12, 0.0, 0.0))
+            .expect("reset");
+        assert_eq!(reset.cause.trace_id, 0, "a reset's frame has no cause");
+        for _ in 0..50 {
+            let answered = *driver.frame();
+            let next = *driver.step(0.05, 0.05).expect("a step");
+            let c = &next.cause;
+            assert_eq!(c.trace_id, answered.timing.trace_id, "the cause's trace");
+            assert_eq!(
+                c.stamps_ns[stage::FRAME_PUBLISHED],
+                answered.timing.stamps_ns[stage::FRAME_PUBLISHED]
+            );
+            // Every stage the control step passed, in causal order, then this frame's own
+            // publication.
+            let chain = [
+                c.stamps_ns[stage::FRAME_PUBLISHED],
+                c.stamps_ns[stage::PLANNER_RECEIVED],
+                c.stamps_ns[stage::COMMAND_PUBLISHED],
+                c.stamps_ns[stage::COMMAND_RECEIVED],
+                c.stamps_ns[stage::COMMAND_APPLIED],
+                next.timing.stamps_ns[stage::FRAME_PUBLISHED],
+            ];
+            assert!(chain[0] > 0, "no stamp: {chain:?}");
+            assert!(
+                chain.windows(2).all(|w| w[0] <= w[1]),
+                "stamps out of causal order: {chain:?}"
+            );
+            // The frame's own timing keeps meaning what it meant: the command's receive
+            // and application.
+            assert_eq!(
+                next.timing.stamps_ns[stage::COMMAND_APPLIED],
+                c.stamps_ns[stage::COMMAND_APPLIED]
+            );
+            assert_eq!(
+                next.timing.stamps_ns[stage::COMMAND_RECEIVED],
+                c.stamps_ns[stage::COMMAND_RECEIVED]
+            );
+        }
+    });
+    // SAFETY: kill(2) of our own child, not yet reaped.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while child.try_wait().expect("wait").is_none() {
+        assert!(Instant::now() < deadline, "physics ignored SIGTERM");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    instance
+        .remove_files()
+        .expect("remove the instance's files");
+    if let Err(panic) = checked {
+        std::panic::resume_unwind(panic);
+    }
+}
