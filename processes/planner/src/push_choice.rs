@@ -33,14 +33,32 @@ pub struct PushChoiceSettings {
     /// Alphas tried: every learned alpha's range at this step, degrees.
     pub alpha_step_deg: f64,
     /// Push lengths tried, as fractions of the learned push duration. The prediction of a
-    /// fraction `f` is the learned one scaled by `f` (an approximation: the object turns
-    /// during the push), so only fractions up to 1 are offered.
+    /// fraction `f` is the learned one scaled by `(f + fraction_offset) / (1 +
+    /// fraction_offset)` (an approximation: the object turns during the push), so only
+    /// fractions up to 1 are offered.
     pub push_fractions: Vec<f64>,
+    /// A push moves the object farther than its duration alone says: the approach meets
+    /// it a little before the IR infers contact, and it slides on when the robot stops.
+    /// Measured with the learning protocol's push (0.5 s at 100 mm/s, contact inferred
+    /// at 3 mm): about 9 mm plus 78 mm per second, so an offset of 0.23 of the push.
+    pub fraction_offset: f64,
     /// Predictions with a lower confidence (about how many trials back them) are skipped.
     pub min_confidence: f64,
     /// Metres of distance one radian of orientation error is worth (1 mm per degree by
     /// default: the 10 mm / 10 deg tolerance of the benchmark weighs them equally).
     pub orientation_weight_m_per_rad: f64,
+    /// Risk aversion: metres of cost per metre of the prediction's displacement spread
+    /// (and per radian of its rotation spread times `spread_lever_m`). Where the learned
+    /// effect changes sharply with the contact (corners, the L's ends) the smoothed
+    /// prediction is unreliable, and without this the search picks those pushes for
+    /// effects they do not have.
+    pub spread_weight: f64,
+    /// With [`Goal::Reach`] (orientation free), metres of cost per radian the push turns
+    /// the object: a turning object's centroid runs along an arc, off the line between
+    /// its ends, and turning pushes are the hardest to predict.
+    pub reach_rotation_weight_m_per_rad: f64,
+    /// Lever arm (m) turning a rotation spread into a displacement.
+    pub spread_lever_m: f64,
     /// Rotational symmetry of the object (0: a disc, orientation ignored; 1: none).
     pub symmetry_order: u32,
     /// Radius (m) of the centroid-centred circle the robot starts each push from: the one
@@ -55,8 +73,12 @@ impl PushChoiceSettings {
             contact_count: 120,
             alpha_step_deg: 2.5,
             push_fractions: vec![1.0, 0.5, 0.25],
+            fraction_offset: 0.23,
             min_confidence: 0.5,
             orientation_weight_m_per_rad: 1e-3 * 180.0 / std::f64::consts::PI,
+            spread_weight: 1.0,
+            reach_rotation_weight_m_per_rad: 0.03,
+            spread_lever_m: 0.03,
             symmetry_order,
             start_radius_m,
         }
@@ -75,7 +97,9 @@ pub struct PushPlan {
     pub prediction: Prediction,
     /// The object's predicted pose after the push, world frame.
     pub predicted: Pose2,
-    /// Cost of the predicted pose; compare with [`PushPlanner::cost`] of the present one.
+    /// Cost of the predicted pose plus the prediction's risk (see
+    /// [`PushChoiceSettings::spread_weight`]); compare with [`PushPlanner::cost`] of the
+    /// present one.
     pub cost: f64,
     /// Where the robot starts the push and the heading it drives at, world frame.
     pub start: Pose2,
@@ -140,6 +164,36 @@ impl PushPlanner {
         }
     }
 
+    /// One candidate push of `fraction` of the learned push, whose full-length prediction
+    /// is `p`: the prediction scaled to that length (see
+    /// [`PushChoiceSettings::fraction_offset`]), the object's predicted pose from
+    /// `estimate`, and the push's cost: [`PushPlanner::cost`] of that pose plus the
+    /// prediction's risk and, with [`Goal::Reach`], its turn.
+    pub fn score(
+        &self,
+        p: &Prediction,
+        fraction: f64,
+        estimate: Pose2,
+        goal: &Goal,
+    ) -> (Prediction, Pose2, f64) {
+        let s = &self.settings;
+        let scale = (fraction + s.fraction_offset) / (1.0 + s.fraction_offset);
+        let scaled = Prediction {
+            displacement: p.displacement * scale,
+            rotation_rad: p.rotation_rad * scale,
+            ..*p
+        };
+        let predicted = scaled.apply_to(estimate);
+        let risk = s.spread_weight
+            * scale
+            * (p.displacement_spread_m + s.spread_lever_m * p.rotation_spread_rad);
+        let turn = match goal {
+            Goal::Reach { .. } => s.reach_rotation_weight_m_per_rad * scaled.rotation_rad.abs(),
+            Goal::Place { .. } => 0.0,
+        };
+        (scaled, predicted, self.cost(predicted, goal) + risk + turn)
+    }
+
     /// The push whose predicted outcome is closest to `goal` from the object's estimated
     /// pose `estimate` (world frame); `None` if the AG predicts nothing anywhere.
     pub fn plan(&self, ag: &AffordanceGradient, estimate: Pose2, goal: &Goal) -> Option<PushPlan> {
@@ -153,13 +207,7 @@ impl PushPlanner {
                     continue;
                 }
                 for &f in &self.settings.push_fractions {
-                    let scaled = Prediction {
-                        displacement: p.displacement * f,
-                        rotation_rad: p.rotation_rad * f,
-                        ..p
-                    };
-                    let predicted = scaled.apply_to(estimate);
-                    let cost = self.cost(predicted, goal);
+                    let (scaled, predicted, cost) = self.score(&p, f, estimate, goal);
                     if best.is_some_and(|b| b.cost <= cost) {
                         continue;
                     }

@@ -1,3 +1,4 @@
 //! Shared pieces of the benchmark binaries.
 
 pub mod hop;
+pub mod math;
