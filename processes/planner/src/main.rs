@@ -1,5 +1,7 @@
 //! The planner process: chooses and carries out pushes.
 
+mod learn_mode;
+
 use std::time::Duration;
 
 use agp_planner::{ContactSense, PushPhase, PushRoutine, PushSettings};
@@ -17,6 +19,11 @@ enum Mode {
     /// inferring contact from the IR readings, and report what the robot sensed. No
     /// estimator is needed; the run ends when the script does.
     Script,
+    /// The learning phase (benchmarks.md section 1) over the real pipeline: circle the
+    /// object for its shape, then push it from every side at each alpha, telling the
+    /// estimator each step of the protocol; ends when the estimator reports the gradients
+    /// learned and saved. Needs physics and `agp-estimator` in lockstep.
+    Learn,
 }
 
 /// Chooses pushes and drives the robot.
@@ -41,9 +48,13 @@ struct Args {
     /// Script: number of pushes, from sides evenly spread around the object.
     #[arg(long, default_value_t = 4)]
     pushes: u32,
-    /// Push duration after contact, milliseconds.
-    #[arg(long, default_value_t = 2000)]
-    push_ms: u64,
+    /// Push duration after contact, milliseconds (default: 2000 in `script`, 500 in
+    /// `learn`, the learning bench's).
+    #[arg(long)]
+    push_ms: Option<u64>,
+    /// Learn: trials per alpha, evenly spread round the object (60: one every 6 deg).
+    #[arg(long, default_value_t = 60)]
+    trials_per_alpha: u32,
     /// The epoch this planner drives at. 0: from the start. Set by the supervisor for a hot
     /// swap: the planner then tells it when it is ready, waits for its epoch to become
     /// active, and reports its first applied command.
@@ -122,6 +133,20 @@ fn run() -> Result<()> {
             }
             script(&instance, &scenario, &args)
         }
+        Mode::Learn => {
+            if args.clock != "lockstep" {
+                bail!(
+                    "the learning phase needs the lockstep clock, not `{}`",
+                    args.clock
+                );
+            }
+            let settings = learn_mode::LearnSettings::new(
+                args.trials_per_alpha,
+                args.push_ms.unwrap_or(500),
+                TIMEOUT,
+            );
+            learn_mode::run(&instance, &scenario, args.epoch, &settings)
+        }
     }
 }
 
@@ -142,15 +167,16 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
         }
         Err(e) => return Err(e),
     };
+    let push_ms = args.push_ms.unwrap_or(2000);
     let settings = PushSettings {
-        push_duration: args.push_ms as f64 * 1e-3,
+        push_duration: push_ms as f64 * 1e-3,
         ..PushSettings::default()
     };
     let obj = scenario.object.start;
     let radius = scenario.object.shape.radius() + robot.body_radius + 0.03;
     println!(
         "scripted drive: {} pushes of `{}`, {} ms each",
-        args.pushes, scenario.name, args.push_ms
+        args.pushes, scenario.name, push_ms
     );
     let mut k = 0;
     while k < args.pushes {

@@ -1,0 +1,561 @@
+//! The estimator process: learns the object's affordance gradients from IR frames and the planner's learning events, and publishes them zero-copy.
+//!
+//! It reads IR frames (readings and odometry: never ground truth) and the planner's
+//! [`LearnEvent`]s, feeds an [`agp_estimator::LearningSession`], reports each trial on the
+//! learn reports topic and acknowledges every frame with an [`ObjectEstimate`] of the same
+//! publish stamp (the planner in `learn` mode waits for it, so no frame is lost). When the
+//! planner says learning is done it writes every grid (S, Px, Py, R+, R- per alpha) straight
+//! into loaned shared-memory samples, sends the `Learned` report and saves the AG file to
+//! `$AGP_RESULTS/<object>.ag`. With `--load FILE` it publishes the grids of a saved file at
+//! once instead of learning (a restarted estimator gets its gradients back).
+//!
+//! Order: the planner sends an event about a frame before the command that makes the next
+//! frame, so draining the events before each frame hands them over in protocol order.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use agp_affordance::AffordanceGradient;
+use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
+use agp_shared_types::{
+    GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
+    LearnReportKind, ObjectEstimate, WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler,
+    monotonic_ns, stage,
+};
+use agp_world::{Pose, RobotDescription, Scenario};
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Parser;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::{Node, ipc};
+
+/// Learns affordance gradients from IR frames and publishes them.
+///
+/// Every option can also come from the environment the supervisor sets (`AGP_INSTANCE`,
+/// `AGP_SCENARIO`, `AGP_RESULTS`).
+#[derive(Debug, Parser)]
+#[command(name = "agp-estimator", version)]
+struct Args {
+    /// Instance name, shared with the other processes of the pipeline.
+    #[arg(long, env = "AGP_INSTANCE")]
+    instance: String,
+    /// Built-in scenario or scenario file: which object is learned (its name and symmetry).
+    #[arg(long, env = "AGP_SCENARIO", default_value = "triangle")]
+    scenario: String,
+    /// Folder the AG file is saved in, as `<object>.ag`.
+    #[arg(long, env = "AGP_RESULTS", default_value = "results")]
+    results: PathBuf,
+    /// Publish the gradients of this AG file at once instead of learning.
+    #[arg(long)]
+    load: Option<PathBuf>,
+    /// Exit with an error when neither a frame nor an event arrives for this long,
+    /// seconds; 0 waits until SIGTERM.
+    #[arg(long, default_value_t = 0)]
+    idle_timeout_s: u64,
+}
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("agp-estimator: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+/// Longest single wait of the main loop: after it, late subscribers are connected (and get
+/// the publishers' history) and the idle limit is checked.
+const WAIT_SLICE: Duration = Duration::from_millis(20);
+
+fn run() -> Result<()> {
+    let args = Args::parse();
+    install_shutdown_handler();
+    let scenario = Scenario::resolve(&args.scenario)?;
+    let instance = Instance::new(&args.instance)
+        .with_context(|| format!("bad instance name `{}`", args.instance))?;
+    let mut estimator = Estimator::open(&instance, &scenario, &args)?;
+    if let Some(path) = &args.load {
+        let gradient = AffordanceGradient::load(path)
+            .with_context(|| format!("cannot load the AG file {}", path.display()))?;
+        estimator.publish(&gradient)?;
+        estimator.report(LearnReport {
+            kind: LearnReportKind::Learned as u32,
+            valid: 1,
+            grids_seq: estimator.grids_seq,
+            ..LearnReport::default()
+        })?;
+        println!(
+            "agp-estimator: published the gradients of {} (grids seq {})",
+            path.display(),
+            estimator.grids_seq
+        );
+    }
+    let idle = (args.idle_timeout_s > 0).then(|| Duration::from_secs(args.idle_timeout_s));
+    let mut last_input = Instant::now();
+    loop {
+        let outcome = {
+            let waiter = &estimator.waiter;
+            let state = &mut estimator.state;
+            waiter.wait_for(WAIT_SLICE, || match state.poll() {
+                Ok(true) => Some(Ok(())),
+                Ok(false) => None,
+                Err(e) => Some(Err(e)),
+            })
+        };
+        match outcome {
+            WaitOutcome::Ready(r) => {
+                r?;
+                last_input = Instant::now();
+            }
+            WaitOutcome::Shutdown => return Ok(()),
+            WaitOutcome::TimedOut => {
+                estimator.update_connections()?;
+                if let Some(limit) = idle
+                    && last_input.elapsed() > limit
+                {
+                    bail!("no IR frame and no learn event for {limit:?}");
+                }
+            }
+        }
+        if let Some(gradient) = estimator.state.finished.take() {
+            estimator.finish(&gradient)?;
+        }
+    }
+}
+
+/// The ports and the learning state.
+struct Estimator {
+    _node: Node<ipc::Service>,
+    waiter: Waiter,
+    state: State,
+    grids: Publisher<ipc::Service, GradientGrid, ()>,
+    grids_wake: Notifier<ipc::Service>,
+    grids_seq: u64,
+    results: PathBuf,
+    object: String,
+}
+
+/// What the main loop's poll works on.
+struct State {
+    frames: Subscriber<ipc::Service, IrFrame, ()>,
+    events: Subscriber<ipc::Service, LearnEvent, ()>,
+    estimates: Publisher<ipc::Service, ObjectEstimate, ()>,
+    estimates_wake: Notifier<ipc::Service>,
+    reports: Publisher<ipc::Service, LearnReport, ()>,
+    reports_wake: Notifier<ipc::Service>,
+    /// The session under way (`None` once learning ended, or with `--load`).
+    session: Option<LearningSession>,
+    report_seq: u64,
+    trials_total: u32,
+    /// Set when the planner said learning is done: the gradient to publish and save.
+    finished: Option<AffordanceGradient>,
+    /// Trials learned and rejected when the session ended.
+    final_counts: (u32, u32),
+    grids_seq: u64,
+}
+
+fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
+    move |e| anyhow!("cannot open {what}: {e:?}")
+}
+
+fn view(e: &LearnEvent) -> IrView {
+    IrView::new(
+        e.ir_sample,
+        e.ir_raw,
+        Pose::new(e.odometry.x, e.odometry.y, e.odometry.theta),
+    )
+}
+
+impl Estimator {
+    fn open(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<Self> {
+        let node = instance
+            .node("estimator", false)
+            .map_err(open_err("the estimator node"))?;
+        let frames = instance
+            .ir_frames(&node)
+            .map_err(open_err("the IR frames"))?;
+        let events = instance
+            .learn_events(&node)
+            .map_err(open_err("the learn events"))?;
+        let estimates = instance
+            .estimates(&node)
+            .map_err(open_err("the estimates"))?;
+        let reports = instance
+            .learn_reports(&node)
+            .map_err(open_err("the learn reports"))?;
+        let grids = instance.grids(&node).map_err(open_err("the grids"))?;
+        let session = if args.load.is_some() {
+            None
+        } else {
+            Some(session(scenario)?)
+        };
+        let state = State {
+            frames: frames
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(open_err("the IR frame subscriber"))?,
+            events: events
+                .data
+                .subscriber_builder()
+                .create()
+                .map_err(open_err("the learn event subscriber"))?,
+            estimates: estimates
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(open_err("the estimate publisher"))?,
+            estimates_wake: estimates
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(open_err("the estimate notifier"))?,
+            reports: reports
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(open_err("the report publisher"))?,
+            reports_wake: reports
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(open_err("the report notifier"))?,
+            session,
+            report_seq: 0,
+            trials_total: 0,
+            finished: None,
+            final_counts: (0, 0),
+            grids_seq: 0,
+        };
+        // Frames and learn events notify the same event service.
+        let listener = frames
+            .event
+            .listener_builder()
+            .create()
+            .map_err(open_err("the IR frame listener"))?;
+        Ok(Self {
+            waiter: Waiter::new(listener, WaitStrategy::from_env()),
+            state,
+            grids: grids
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(open_err("the grid publisher"))?,
+            grids_wake: grids
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(open_err("the grid notifier"))?,
+            grids_seq: 0,
+            results: args.results.clone(),
+            object: scenario.name.clone(),
+            _node: node,
+        })
+    }
+
+    fn report(&mut self, r: LearnReport) -> Result<()> {
+        self.state.report(r)
+    }
+
+    /// Connects subscribers that came since the last send: a publisher hands its history
+    /// (the latest estimate, the grids) to a new subscriber only then.
+    fn update_connections(&self) -> Result<()> {
+        self.state
+            .estimates
+            .update_connections()
+            .map_err(|e| anyhow!("cannot update the estimate connections: {e:?}"))?;
+        self.state
+            .reports
+            .update_connections()
+            .map_err(|e| anyhow!("cannot update the report connections: {e:?}"))?;
+        self.grids
+            .update_connections()
+            .map_err(|e| anyhow!("cannot update the grid connections: {e:?}"))
+    }
+
+    /// Publishes every grid of `gradient` (S, Px, Py, R+, R- per alpha), each written once
+    /// straight into its loaned sample.
+    fn publish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
+        self.grids_seq += 1;
+        let seq = self.grids_seq;
+        for alpha in gradient.alphas_deg() {
+            for kind in GridKind::ALL {
+                let sample = self
+                    .grids
+                    .loan_uninit()
+                    .map_err(|e| anyhow!("cannot loan a grid sample: {e:?}"))?;
+                // SAFETY: the sample is shared memory mapped from a file: its bytes are
+                // always initialised (zeros, or an older sample's), and every bit pattern
+                // is a valid `GradientGrid` (integers and floats only, no padding), so
+                // taking it as initialised reads nothing undefined. `write_component`
+                // then overwrites the header and every cell.
+                let mut sample = unsafe { sample.assume_init() };
+                gradient
+                    .write_component(alpha, kind, seq, sample.payload_mut())
+                    .map_err(|e| anyhow!("cannot write a grid: {e}"))?;
+                sample
+                    .send()
+                    .map_err(|e| anyhow!("cannot send a grid: {e:?}"))?;
+            }
+        }
+        let _ = self.grids_wake.notify();
+        self.state.grids_seq = seq;
+        Ok(())
+    }
+
+    /// Learning is done: publishes the grids, reports `Learned`, saves the AG file.
+    fn finish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
+        self.publish(gradient)?;
+        let path = self.results.join(format!("{}.ag", self.object));
+        let saved = save(gradient, &path);
+        if let Err(e) = &saved {
+            eprintln!("agp-estimator: {e:#}");
+        }
+        let (learned, rejected) = self.state.counts();
+        self.report(LearnReport {
+            kind: LearnReportKind::Learned as u32,
+            trials_learned: learned,
+            trials_rejected: rejected,
+            trials_total: self.state.trials_total,
+            valid: u32::from(saved.is_ok()),
+            grids_seq: self.grids_seq,
+            ..LearnReport::default()
+        })?;
+        println!(
+            "agp-estimator: learned `{}`: {learned} trials learned, {rejected} rejected of {}; {} grids published (seq {}); AG file {}",
+            self.object,
+            self.state.trials_total,
+            gradient.alphas_deg().count() * GridKind::ALL.len(),
+            self.grids_seq,
+            if saved.is_ok() {
+                path.display().to_string()
+            } else {
+                "not saved".into()
+            }
+        );
+        for alpha in gradient.alphas_deg() {
+            println!(
+                "agp-estimator:   alpha {alpha:+.0} deg: {} pushes, largest rotation {}",
+                gradient.push_count(alpha).unwrap_or(0),
+                gradient
+                    .max_rotation_deg(alpha)
+                    .map_or("none".into(), |r| format!("{r:.2} deg"))
+            );
+        }
+        Ok(())
+    }
+}
+
+fn save(gradient: &AffordanceGradient, path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the results folder {}", dir.display()))?;
+    }
+    gradient
+        .save(path)
+        .with_context(|| format!("cannot save the AG file {}", path.display()))
+}
+
+/// The learning session of `scenario`'s object.
+fn session(scenario: &Scenario) -> Result<LearningSession> {
+    let robot = RobotDescription::epuck();
+    let shape = &scenario.object.shape;
+    let config = LearningConfig::for_symmetry(shape.symmetry_order());
+    let half_extent = config.learner.cell_size_m * GRID_SIDE as f64 / 2.0;
+    if shape.radius().is_nan() || shape.radius() >= half_extent {
+        bail!(
+            "`{}` is too large to learn: it reaches {:.0} mm from its centroid, the gradient's grid only {:.0} mm",
+            scenario.name,
+            shape.radius() * 1e3,
+            half_extent * 1e3
+        );
+    }
+    LearningSession::new(&scenario.name, &robot, config)
+        .with_context(|| format!("cannot learn `{}`", scenario.name))
+}
+
+impl State {
+    fn counts(&self) -> (u32, u32) {
+        self.session.as_ref().map_or(self.final_counts, |s| {
+            (s.trials_learned() as u32, s.trials_rejected() as u32)
+        })
+    }
+
+    /// Handles what arrived: returns whether anything did. Each frame is preceded by the
+    /// events sent before it, and acknowledged once observed. Allocates nothing (beyond
+    /// iceoryx2's per-sample bookkeeping).
+    fn poll(&mut self) -> Result<bool> {
+        let mut any = self.drain_events()?;
+        loop {
+            let frame = match self.frames.receive() {
+                Ok(Some(f)) => *f,
+                Ok(None) => break,
+                Err(e) => bail!("cannot receive an IR frame: {e:?}"),
+            };
+            any = true;
+            let received = monotonic_ns();
+            self.drain_events()?;
+            if let Some(s) = &mut self.session {
+                s.observe(&IrView::from(&frame));
+            }
+            self.acknowledge(&frame, received)?;
+        }
+        Ok(any)
+    }
+
+    fn drain_events(&mut self) -> Result<bool> {
+        let mut any = false;
+        loop {
+            let event = match self.events.receive() {
+                Ok(Some(e)) => *e,
+                Ok(None) => return Ok(any),
+                Err(e) => bail!("cannot receive a learn event: {e:?}"),
+            };
+            any = true;
+            self.handle(&event)?;
+        }
+    }
+
+    /// The frame's estimate: no pose during learning, the frame's trace and publish stamp.
+    fn acknowledge(&mut self, frame: &IrFrame, received_ns: u64) -> Result<()> {
+        let mut e = ObjectEstimate {
+            step: frame.step,
+            grids_seq: self.grids_seq,
+            ..ObjectEstimate::default()
+        };
+        e.timing.trace_id = frame.timing.trace_id;
+        e.timing.stamps_ns[stage::FRAME_PUBLISHED] = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
+        e.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] = received_ns;
+        e.timing.stamps_ns[stage::ESTIMATE_PUBLISHED] = monotonic_ns();
+        let sample = self
+            .estimates
+            .loan_uninit()
+            .map_err(|e| anyhow!("cannot loan an estimate: {e:?}"))?;
+        sample
+            .write_payload(e)
+            .send()
+            .map_err(|e| anyhow!("cannot send an estimate: {e:?}"))?;
+        let _ = self.estimates_wake.notify();
+        Ok(())
+    }
+
+    fn report(&mut self, mut r: LearnReport) -> Result<()> {
+        self.report_seq += 1;
+        r.seq = self.report_seq;
+        let sample = self
+            .reports
+            .loan_uninit()
+            .map_err(|e| anyhow!("cannot loan a report: {e:?}"))?;
+        sample
+            .write_payload(r)
+            .send()
+            .map_err(|e| anyhow!("cannot send a report: {e:?}"))?;
+        let _ = self.reports_wake.notify();
+        Ok(())
+    }
+
+    /// A trial report of `kind` for `event`, with the counts so far.
+    fn trial_report(&self, kind: LearnReportKind, event: &LearnEvent) -> LearnReport {
+        let (learned, rejected) = self.counts();
+        LearnReport {
+            kind: kind as u32,
+            index: event.index,
+            trials_learned: learned,
+            trials_rejected: rejected,
+            trials_total: self.trials_total,
+            step: event.step,
+            alpha_deg: event.alpha_deg,
+            grids_seq: self.grids_seq,
+            ..LearnReport::default()
+        }
+    }
+
+    fn handle(&mut self, event: &LearnEvent) -> Result<()> {
+        let Some(kind) = LearnEventKind::from_u32(event.kind) else {
+            eprintln!("agp-estimator: unknown learn event kind {}", event.kind);
+            return Ok(());
+        };
+        let Some(session) = &mut self.session else {
+            // Learning is over (or the gradients came from a file).
+            return Ok(());
+        };
+        self.trials_total = self.trials_total.max(event.total);
+        let v = view(event);
+        let object = Pose::new(event.object.x, event.object.y, event.object.theta);
+        match kind {
+            LearnEventKind::ShapeBegin => {
+                session.begin_shape_circling(object);
+                session.observe(&v);
+            }
+            LearnEventKind::ShapeEnd => {
+                let r = session.finish_shape_circling();
+                let mut report = self.trial_report(LearnReportKind::ShapeLearned, event);
+                match r {
+                    Ok(points) => report.value = points as f64,
+                    Err(e) => {
+                        eprintln!("agp-estimator: the shape circling gave no shape: {e}");
+                        report.kind = LearnReportKind::ShapeFailed as u32;
+                    }
+                }
+                self.report(report)?;
+            }
+            LearnEventKind::TrialBegin => {
+                if let Err(e) = session.begin_trial(event.alpha_deg, object) {
+                    eprintln!("agp-estimator: trial {} cannot start: {e}", event.index);
+                    session.abandon_trial();
+                    let r = self.trial_report(LearnReportKind::TrialRejected, event);
+                    self.report(r)?;
+                } else {
+                    session.observe(&v);
+                }
+            }
+            LearnEventKind::Contact => {
+                if session.recorder().phase() == TrialPhase::Approach
+                    && let Err(e) = session.infer_contact(&v)
+                {
+                    eprintln!("agp-estimator: trial {}: {e}", event.index);
+                }
+            }
+            LearnEventKind::PushEnd => {
+                if event.flag == 1 && session.recorder().phase() == TrialPhase::Push {
+                    if let Err(e) = session.end_push(&v) {
+                        eprintln!("agp-estimator: trial {}: {e}", event.index);
+                    }
+                } else if session.recorder().phase() != TrialPhase::Idle {
+                    session.abandon_trial();
+                    let r = self.trial_report(LearnReportKind::TrialRejected, event);
+                    self.report(r)?;
+                }
+            }
+            LearnEventKind::TrialEnd => {
+                if session.recorder().phase() != TrialPhase::Circling {
+                    return Ok(());
+                }
+                let result = session.finish_trial();
+                let mut r = self.trial_report(LearnReportKind::TrialLearned, event);
+                match result {
+                    Ok(record) => {
+                        r.contact_point = record.outcome.contact_point_obj.to_array();
+                        r.displacement = record.outcome.displacement_obj.to_array();
+                        r.rotation_rad = record.outcome.rotation_rad;
+                        r.value = record.matched.inlier_fraction;
+                    }
+                    Err(e) => {
+                        eprintln!("agp-estimator: trial {} rejected: {e}", event.index);
+                        r.kind = LearnReportKind::TrialRejected as u32;
+                    }
+                }
+                self.report(r)?;
+            }
+            LearnEventKind::LearningDone => {
+                if let Some(s) = self.session.take() {
+                    let (learned, rejected) = (s.trials_learned(), s.trials_rejected());
+                    self.finished = Some(s.into_gradient());
+                    self.final_counts = (learned as u32, rejected as u32);
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
