@@ -14,6 +14,10 @@ pub struct PushSettings {
     pub push_duration: f64,
     /// Give up the approach after this long without seeing the object close, seconds.
     pub approach_timeout: f64,
+    /// Also infer contact when the front gap stops shrinking (see [`PushRoutine`]). A face
+    /// running alongside the robot's path also keeps the gap still: a planner whose push
+    /// went nowhere can retry without it.
+    pub stall_contact: bool,
 }
 
 impl Default for PushSettings {
@@ -24,6 +28,7 @@ impl Default for PushSettings {
             push_speed: 0.1,
             push_duration: 2.0,
             approach_timeout: 6.0,
+            stall_contact: true,
         }
     }
 }
@@ -106,7 +111,7 @@ impl PushRoutine {
                     self.samples_seen += 1;
                 }
                 let near = gap.is_some_and(|g| g <= self.settings.stop_gap)
-                    || self.stalled(1.0 / sense.ir_rate_hz());
+                    || (self.settings.stall_contact && self.stalled(1.0 / sense.ir_rate_hz()));
                 if near {
                     self.contact_time = Some(now);
                     self.phase = PushPhase::Push {

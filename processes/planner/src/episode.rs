@@ -1,0 +1,1351 @@
+//! One episode of a task against an in-process [`Sim`]: the paper's Algorithm 5
+//! (benchPusher) for the `affordance` and `oracle` planners, and the centroid-pushing
+//! `baseline`.
+//!
+//! ```text
+//! findObj; e <- EstimatePose            (approach, circle by the side IR, match S)
+//! while not done(e):                    (judged on a fresh estimate)
+//!     P <- planBestPush(A, e, goal)     (PushPlanner: contact x alpha x push length;
+//!                                        trajectory: a centroid push steered by the AG)
+//!     travel round to P's start; push   (orbit, never touching; IR-inferred contact)
+//!     e <- updateEstimate(e, A)         (the AG's prediction, corrected so that the
+//!                                        object touches the robot where it stopped)
+//!     if the accumulated error calls for it, or the push surprised: e <- EstimatePose
+//! ```
+//!
+//! A push surprises when it ends without the IR seeing the object just ahead, or when
+//! the prediction would need more than 15 mm of correction to touch the robot. Pushes
+//! that leave the object where it was (a short push stopping short of it) are followed
+//! by a full one.
+//!
+//! Only the evaluation (the recorded poses, the final errors), the development trace and
+//! the `oracle` read ground truth: the `affordance` and `baseline` planners see IR
+//! readings, odometry and the overhead fix of the robot, nothing else.
+
+use std::time::Instant;
+
+use agp_affordance::{
+    AffordanceGradient, Prediction, ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
+};
+use agp_physics::{Sim, SimBuildError, SimConfig};
+use agp_shared_types::Pose2;
+use agp_world::{Pose, RobotDescription, Scenario};
+use glam::DVec2;
+
+use crate::{
+    CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, Goal,
+    PushChoiceSettings, PushPhase, PushPlanner, PushRoutine, PushSettings, RobotLocalizer,
+    TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, symmetric_angle_error,
+};
+
+/// Which planner runs an episode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum PlannerKind {
+    /// The paper's: the learned AG, the object's pose from IR only.
+    Affordance,
+    /// No AG: pushes through the estimated centroid towards the goal; the centroid from
+    /// the circled border (IR only), moved by the robot's own travel while it pushes.
+    Baseline,
+    /// The affordance planner fed the object's true pose before every push: an upper
+    /// bound, and the only planner that reads ground truth.
+    Oracle,
+}
+
+impl PlannerKind {
+    /// All planners, in report order.
+    pub const ALL: [Self; 3] = [Self::Affordance, Self::Baseline, Self::Oracle];
+
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Affordance => "affordance",
+            Self::Baseline => "baseline",
+            Self::Oracle => "oracle",
+        }
+    }
+
+    /// Whether the planner reads ground truth (only the oracle).
+    pub fn reads_ground_truth(self) -> bool {
+        self == Self::Oracle
+    }
+
+    /// Whether the planner needs an affordance gradient.
+    pub fn needs_gradient(self) -> bool {
+        self != Self::Baseline
+    }
+}
+
+impl std::fmt::Display for PlannerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A planner name that is none of `affordance`, `baseline`, `oracle`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown planner `{0}` (planners: affordance, baseline, oracle)")]
+pub struct PlannerParseError(pub String);
+
+impl std::str::FromStr for PlannerKind {
+    type Err = PlannerParseError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == s.trim())
+            .ok_or_else(|| PlannerParseError(s.to_owned()))
+    }
+}
+
+/// What an episode is after.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Task {
+    /// The object's centroid at the goal's position, its orientation at the goal's
+    /// (modulo the object's symmetry), world frame.
+    Place { goal: Pose2 },
+    /// The centroid along this polyline (world frame, m) to its end.
+    Trajectory { path: Vec<DVec2> },
+}
+
+/// How an episode runs. [`EpisodeConfig::for_scenario`] gives the defaults.
+#[derive(Debug, Clone)]
+pub struct EpisodeConfig {
+    /// Approach and push; `push_duration` is the learned push's (the AG predicts that
+    /// push; shorter pushes are fractions of it).
+    pub push: PushSettings,
+    /// The circling that estimates the object's pose.
+    pub circle: CircleSettings,
+    /// The travel round the object between pushes.
+    pub travel: TravelSettings,
+    /// Gap (m) between the robot's shell and the object's farthest learned point at a
+    /// push's start: the learning trials' (20 mm).
+    pub start_gap_m: f64,
+    /// After a push the robot backs off this long (s) at `backoff_speed` (m/s).
+    pub backoff_s: f64,
+    pub backoff_speed: f64,
+    /// How far each overhead fix pulls the robot's pose estimate, in (0, 1].
+    pub fix_gain: f64,
+    /// Success: position within this (m) and orientation within `tolerance_rad`.
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+    /// Give up after this many pushes.
+    pub max_pushes: u32,
+    /// Re-estimate by circling after at most this many pushes.
+    pub max_pushes_between_estimates: u32,
+    /// Each push adds to the estimate's error bound this fraction of its predicted motion
+    /// (displacement and rotation), plus the prediction's spread, plus the floors below.
+    pub error_growth: f64,
+    pub error_floor_m: f64,
+    pub error_floor_rad: f64,
+    /// Re-estimate when the error bound exceeds the tolerance or this fraction of what
+    /// is left to do (the distance to the target, the orientation error), whichever is
+    /// larger: far from the goal a rough estimate does.
+    pub reestimate_fraction: f64,
+    /// Farther than this (m) from the goal, the orientation's error bound does not call
+    /// for a circling.
+    pub orientation_matters_within_m: f64,
+    /// Correct each prediction so that the object's learned border touches the robot's
+    /// body where the robot stopped pushing (odometry).
+    pub contact_correction: bool,
+    /// Trajectory: the target is this far (m) ahead along the path of the centroid's
+    /// projection on it.
+    pub lookahead_m: f64,
+    /// While the robot pushes, the object's true pose is recorded every this many physics
+    /// steps (for the evaluation and the plots).
+    pub record_every_steps: u64,
+    /// Give up after this much simulated time, s.
+    pub max_sim_time_s: f64,
+    /// Seed of the simulator's sensor noise.
+    pub seed: u64,
+    /// Overrides of the push choice's defaults ([`PushChoiceSettings::new`]): risk
+    /// aversion, the turn penalty when only the position matters, the push lengths tried.
+    pub spread_weight: f64,
+    pub reach_rotation_weight_m_per_rad: f64,
+    pub push_fractions: Vec<f64>,
+    /// Alphas tried, every this many degrees across the learned ones (the AG interpolates
+    /// between learned alphas, worse than it predicts at them).
+    pub alpha_step_deg: f64,
+    /// Trajectory: the affordance planner pushes through the centroid, steered by the AG
+    /// (see `plan_steered`), instead of searching every push for the lookahead point.
+    pub steer_centroid_pushes: bool,
+    /// Largest angle (deg) between a steered push and the target's direction.
+    pub steer_max_deg: f64,
+    /// Stop when the estimate is within this fraction of the tolerance (the estimate has
+    /// errors of its own; 1 stops at the tolerance)...
+    pub stop_margin: f64,
+    /// ...plus this much per push made near the target (within twice the tolerance),
+    /// up to 1.
+    pub stop_margin_relax: f64,
+    /// Print each estimate and push on stderr (development aid).
+    pub trace: bool,
+}
+
+impl EpisodeConfig {
+    /// The defaults for `scenario`: its tolerance, pushes and seed; the learning
+    /// protocol's push (0.5 s at 100 mm/s after an IR-inferred contact).
+    pub fn for_scenario(scenario: &Scenario) -> Self {
+        Self {
+            push: PushSettings {
+                push_duration: 0.5,
+                ..PushSettings::default()
+            },
+            circle: CircleSettings::default(),
+            travel: TravelSettings::default(),
+            start_gap_m: 0.02,
+            backoff_s: 0.15,
+            backoff_speed: 0.08,
+            fix_gain: 0.3,
+            tolerance_m: scenario.task.tolerance_m,
+            tolerance_rad: scenario.task.tolerance_rad,
+            max_pushes: scenario.task.max_pushes,
+            max_pushes_between_estimates: 5,
+            error_growth: 0.15,
+            error_floor_m: 0.001,
+            error_floor_rad: 1f64.to_radians(),
+            reestimate_fraction: 0.3,
+            orientation_matters_within_m: 0.1,
+            contact_correction: true,
+            lookahead_m: 0.04,
+            record_every_steps: 32,
+            max_sim_time_s: 3000.0,
+            seed: scenario.task.seed,
+            spread_weight: 1.0,
+            reach_rotation_weight_m_per_rad: 0.03,
+            push_fractions: vec![1.0, 0.5, 0.25],
+            alpha_step_deg: 2.5,
+            steer_centroid_pushes: true,
+            steer_max_deg: 10.0,
+            stop_margin: 0.7,
+            stop_margin_relax: 0.02,
+            trace: false,
+        }
+    }
+}
+
+/// Why an episode ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpisodeEnd {
+    /// The planner's estimate says the task is done.
+    Done,
+    /// `max_pushes` pushes were used.
+    MaxPushes,
+    /// `max_sim_time_s` passed.
+    TimeLimit,
+    /// The robot lost the object: no circling found it.
+    Lost,
+}
+
+impl EpisodeEnd {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Done => "done",
+            Self::MaxPushes => "max pushes",
+            Self::TimeLimit => "time limit",
+            Self::Lost => "lost",
+        }
+    }
+}
+
+/// The object's true pose at one moment (evaluation only).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseSample {
+    /// Simulated time, s.
+    pub t_s: f64,
+    pub pose: Pose2,
+}
+
+/// What an episode did, judged against ground truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeResult {
+    pub planner: PlannerKind,
+    pub end: EpisodeEnd,
+    /// Place: the final true pose within the tolerance. Trajectory: the end reached
+    /// (the true centroid within the tolerance of the path's end).
+    pub success: bool,
+    /// Place: distance from the goal; trajectory: from the path's end, mm.
+    pub position_error_mm: f64,
+    /// Place: orientation error modulo the symmetry, deg (0 for a trajectory).
+    pub orientation_error_deg: f64,
+    pub pushes: u32,
+    /// Circlings that estimated the object's pose (0 for the oracle).
+    pub circlings: u32,
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    /// The object's true pose at the start, every `record_every_steps` steps while the
+    /// robot pushes, and at the end.
+    pub samples: Vec<PoseSample>,
+}
+
+/// Why an episode could not start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EpisodeRunError {
+    /// The affordance and oracle planners need an affordance gradient.
+    #[error("planner `{0}` needs an affordance gradient")]
+    NoGradient(PlannerKind),
+    /// The trajectory has fewer than two points.
+    #[error("a trajectory needs at least two points")]
+    ShortPath,
+    #[error(transparent)]
+    Sim(#[from] SimBuildError),
+    #[error(transparent)]
+    Matcher(#[from] ShapeMatcherBuildError),
+}
+
+/// Runs one episode of `task` with `planner` on `scenario` (the object and robot at the
+/// scenario's start poses). `ag` is required by the affordance and oracle planners.
+pub fn run_episode(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    ag: Option<&AffordanceGradient>,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+) -> Result<EpisodeResult, EpisodeRunError> {
+    let wall = Instant::now();
+    if let Task::Trajectory { path } = task
+        && path.len() < 2
+    {
+        return Err(EpisodeRunError::ShortPath);
+    }
+    let order = scenario.object.shape.symmetry_order();
+    let brain = match (planner, ag) {
+        (PlannerKind::Baseline, _) => Brain::Baseline { radius: None },
+        (_, None) => return Err(EpisodeRunError::NoGradient(planner)),
+        (_, Some(ag)) => {
+            let matcher = ShapeMatcher::new(
+                &ag.combined_shape(),
+                ShapeMatcherConfig {
+                    symmetry_order: order,
+                    ..ShapeMatcherConfig::default()
+                },
+            )?;
+            let radius = matcher
+                .border_points()
+                .iter()
+                .map(|p| p.length())
+                .fold(0.0, f64::max);
+            let r = radius + robot.body_radius + config.start_gap_m;
+            let choice = PushChoiceSettings {
+                spread_weight: config.spread_weight,
+                reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
+                push_fractions: config.push_fractions.clone(),
+                alpha_step_deg: config.alpha_step_deg,
+                ..PushChoiceSettings::new(order, r)
+            };
+            let push_planner = PushPlanner::new(ag, choice);
+            let long_planner = PushPlanner::new(
+                ag,
+                PushChoiceSettings {
+                    push_fractions: vec![1.0],
+                    ..push_planner.settings().clone()
+                },
+            );
+            Brain::Gradient {
+                ag,
+                matcher: Box::new(matcher),
+                planner: push_planner,
+                long_planner,
+                start_radius: r,
+            }
+        }
+    };
+    let sim = Sim::new(
+        scenario,
+        robot,
+        SimConfig {
+            seed: config.seed,
+            ..SimConfig::default()
+        },
+    )?;
+    let mut run = Run {
+        localizer: RobotLocalizer::new(config.fix_gain),
+        sense: ContactSense::new(robot),
+        robot: robot.clone(),
+        config,
+        sim,
+        samples: Vec::new(),
+        recording: false,
+    };
+    run.record();
+    let mut episode = Episode {
+        run,
+        brain,
+        planner,
+        task,
+        order,
+        pushes: 0,
+        near_pushes: 0,
+        planned_from: None,
+        push_longer: false,
+        circlings: 0,
+    };
+    let end = episode.run();
+    let Episode {
+        mut run,
+        pushes,
+        circlings,
+        ..
+    } = episode;
+    run.record();
+    let truth = run.sim.object_pose();
+    let (position_error_mm, orientation_error_deg, success) = match task {
+        Task::Place { goal } => {
+            let ep = DVec2::new(truth.x - goal.x, truth.y - goal.y).length();
+            let eo = symmetric_angle_error(truth.theta - goal.theta, order).abs();
+            (
+                ep * 1e3,
+                eo.to_degrees(),
+                ep <= config.tolerance_m && eo <= config.tolerance_rad,
+            )
+        }
+        Task::Trajectory { path } => {
+            let end_point = path[path.len() - 1];
+            let ep = (truth.position() - end_point).length();
+            (ep * 1e3, 0.0, ep <= config.tolerance_m)
+        }
+    };
+    Ok(EpisodeResult {
+        planner,
+        end,
+        success,
+        position_error_mm,
+        orientation_error_deg,
+        pushes,
+        circlings,
+        sim_time_s: run.sim.sim_time(),
+        wall_time_s: wall.elapsed().as_secs_f64(),
+        samples: run.samples,
+    })
+}
+
+/// What a planner decides with.
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one per episode, built once; boxing buys nothing"
+)]
+enum Brain<'a> {
+    Gradient {
+        ag: &'a AffordanceGradient,
+        matcher: Box<ShapeMatcher>,
+        planner: PushPlanner,
+        /// The same with full pushes only (see `Episode::push_longer`).
+        long_planner: PushPlanner,
+        start_radius: f64,
+    },
+    Baseline {
+        /// The object's radius (m) from the first circling: farthest border point from the
+        /// estimated centroid.
+        radius: Option<f64>,
+    },
+}
+
+/// A push to make: where to start, the heading, how long to push, and (with an AG) the
+/// predicted effect.
+struct PushOrder {
+    /// A retry after pushes that left the object where it was: contact only from a small
+    /// front gap, not from a stalled one.
+    retry: bool,
+    start: Pose2,
+    duration: f64,
+    prediction: Option<Prediction>,
+    /// Orbit radius round the estimated centroid, m.
+    orbit: f64,
+}
+
+/// The object's estimated pose and how far it may be off.
+#[derive(Debug, Clone, Copy)]
+struct Estimate {
+    pose: Pose2,
+    /// Bound on the position error, m, and the orientation error, rad.
+    error_m: f64,
+    error_rad: f64,
+    /// Pushes since the last circling.
+    pushes_since: u32,
+}
+
+impl Estimate {
+    fn fresh(pose: Pose2) -> Self {
+        Self {
+            pose,
+            error_m: 0.0,
+            error_rad: 0.0,
+            pushes_since: 0,
+        }
+    }
+
+    fn position(&self) -> DVec2 {
+        DVec2::new(self.pose.x, self.pose.y)
+    }
+}
+
+struct Episode<'a> {
+    run: Run<'a>,
+    brain: Brain<'a>,
+    planner: PlannerKind,
+    task: &'a Task,
+    order: u32,
+    pushes: u32,
+    circlings: u32,
+    /// Pushes made with the object estimated within twice the tolerance of the target.
+    near_pushes: u32,
+    /// The fresh estimate the last pushes were planned from.
+    planned_from: Option<Pose2>,
+    /// The last pushes left the object where it was (a short push that stopped short of
+    /// it): the next push is a full one.
+    push_longer: bool,
+}
+
+/// Converts the turn penalty (metres per radian of turn) of a steered push into radians
+/// of heading error: a heading error of e radians puts the centroid about e times this
+/// far off after a push.
+const STEER_LEVER_M: f64 = 0.05;
+
+/// Consecutive circlings that may fail before the object counts as lost.
+const MAX_FAILED_ESTIMATES: u32 = 3;
+
+impl Episode<'_> {
+    fn run(&mut self) -> EpisodeEnd {
+        let config = self.run.config;
+        let oracle = self.planner.reads_ground_truth();
+        // findObj + EstimateOrientationObj: the robot starts facing the object.
+        let mut est = if oracle {
+            Estimate::fresh(self.oracle_truth())
+        } else {
+            match self.estimate(None) {
+                Some(e) => e,
+                None => return EpisodeEnd::Lost,
+            }
+        };
+        let mut failed = 0;
+        loop {
+            if oracle {
+                est = Estimate::fresh(self.oracle_truth());
+            }
+            if est.pushes_since == 0
+                && let Some(before) = self.planned_from.take()
+            {
+                let moved = (est.position() - DVec2::new(before.x, before.y)).length();
+                let period = if self.order == 0 {
+                    f64::INFINITY
+                } else {
+                    std::f64::consts::TAU / f64::from(self.order)
+                };
+                let turned = symmetric_period_distance(est.pose.theta - before.theta, period);
+                // A push that reaches the object moves it 9 mm or more; the estimates agree
+                // to a millimetre or two.
+                self.push_longer = moved < 0.003 && turned < 3f64.to_radians();
+                if self.push_longer {
+                    self.trace(format_args!("the last pushes left the object where it was"));
+                }
+            }
+            if self.done(&est) {
+                if est.pushes_since == 0 {
+                    return EpisodeEnd::Done;
+                }
+                match self.estimate(Some(est.pose)) {
+                    Some(e) => {
+                        est = e;
+                        failed = 0;
+                        continue;
+                    }
+                    None => {
+                        failed += 1;
+                        if failed >= MAX_FAILED_ESTIMATES {
+                            return EpisodeEnd::Lost;
+                        }
+                    }
+                }
+            }
+            if self.pushes >= config.max_pushes {
+                return EpisodeEnd::MaxPushes;
+            }
+            if self.run.sim.sim_time() > config.max_sim_time_s {
+                return EpisodeEnd::TimeLimit;
+            }
+            let Some(order) = self.plan(&est) else {
+                return EpisodeEnd::Lost;
+            };
+            if est.pushes_since == 0 {
+                self.planned_from = Some(est.pose);
+            }
+            self.push_longer = false;
+            let (target, _) = self.target(&est);
+            if (est.position() - target).length() <= 2.0 * config.tolerance_m {
+                self.near_pushes += 1;
+            }
+            self.trace(format_args!(
+                "plan from ({:.1}, {:.1}) mm {:.1} deg for {:.2} s",
+                order.start.x * 1e3,
+                order.start.y * 1e3,
+                order.start.theta.to_degrees(),
+                order.duration
+            ));
+            let mut touched = false;
+            if self.run.travel(est.position(), order.orbit, order.start) {
+                let pushed = self
+                    .run
+                    .push(order.duration, order.orbit + 0.03, !order.retry);
+                if let Some(done) = pushed {
+                    touched = true;
+                    self.pushes += 1;
+                    est = self.update(est, &order, done);
+                }
+                self.run.backoff();
+            }
+            if !touched {
+                self.trace(format_args!("no contact"));
+                // The object is not where the estimate says: find it again.
+                est.error_m = f64::INFINITY;
+            }
+            if self.needs_estimate(&est) {
+                match self.estimate(Some(est.pose)) {
+                    Some(e) => {
+                        est = e;
+                        failed = 0;
+                    }
+                    None => {
+                        failed += 1;
+                        if failed >= MAX_FAILED_ESTIMATES {
+                            return EpisodeEnd::Lost;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Development aid: one line on stderr, with the object's true pose for comparison
+    /// (read here only, never by a decision).
+    fn trace(&self, what: std::fmt::Arguments<'_>) {
+        if self.run.config.trace {
+            let truth = self.run.sim.object_pose();
+            eprintln!(
+                "[{} t={:.1}s push {}] {what} [truth ({:.1}, {:.1}) mm {:.1} deg]",
+                self.planner,
+                self.run.sim.sim_time(),
+                self.pushes,
+                truth.x * 1e3,
+                truth.y * 1e3,
+                truth.theta.to_degrees()
+            );
+        }
+    }
+
+    /// The object's true pose: the oracle's input, and nobody else's.
+    fn oracle_truth(&self) -> Pose2 {
+        debug_assert!(self.planner.reads_ground_truth());
+        let p = self.run.sim.object_pose();
+        Pose2::new(p.x, p.y, p.theta)
+    }
+
+    /// The point the centroid should head for, and whether the task is done, by `est`.
+    fn target(&self, est: &Estimate) -> (DVec2, bool) {
+        let c = self.run.config;
+        // The margin relaxes to the full tolerance as pushes near the target pile up: the
+        // shortest push moves the object about 10 mm, and an estimate off by a few mm can
+        // keep a strict margin out of reach.
+        let margin = (c.stop_margin + c.stop_margin_relax * f64::from(self.near_pushes)).min(1.0);
+        let tol = margin * c.tolerance_m;
+        match self.task {
+            Task::Place { goal } => {
+                let g = DVec2::new(goal.x, goal.y);
+                let near = (est.position() - g).length() <= tol;
+                let turned = symmetric_angle_error(est.pose.theta - goal.theta, self.order).abs()
+                    <= margin * c.tolerance_rad;
+                // The baseline cannot turn the object on purpose: it stops at the position.
+                let done = near && (turned || matches!(self.brain, Brain::Baseline { .. }));
+                (g, done)
+            }
+            Task::Trajectory { path } => {
+                let end = path[path.len() - 1];
+                let target = lookahead_point(path, est.position(), self.run.config.lookahead_m);
+                (target, (est.position() - end).length() <= tol)
+            }
+        }
+    }
+
+    fn done(&self, est: &Estimate) -> bool {
+        self.target(est).1
+    }
+
+    fn needs_estimate(&self, est: &Estimate) -> bool {
+        if self.planner.reads_ground_truth() {
+            return false;
+        }
+        let c = self.run.config;
+        if est.pushes_since >= c.max_pushes_between_estimates || !est.error_m.is_finite() {
+            return true;
+        }
+        let (target, _) = self.target(est);
+        let distance = (est.position() - target).length();
+        if est.error_m > c.tolerance_m.max(c.reestimate_fraction * distance) {
+            return true;
+        }
+        match (self.task, &self.brain) {
+            // Far from the goal the orientation hardly weighs in the push choice.
+            (Task::Place { goal }, Brain::Gradient { .. })
+                if distance < c.orientation_matters_within_m =>
+            {
+                let off = symmetric_angle_error(est.pose.theta - goal.theta, self.order).abs();
+                est.error_rad > c.tolerance_rad.max(c.reestimate_fraction * off)
+            }
+            _ => false,
+        }
+    }
+
+    /// planBestPush.
+    fn plan(&self, est: &Estimate) -> Option<PushOrder> {
+        let c = self.run.config;
+        let (target, _) = self.target(est);
+        match &self.brain {
+            Brain::Gradient {
+                ag,
+                planner,
+                long_planner,
+                start_radius,
+                ..
+            } => {
+                let planner = if self.push_longer {
+                    long_planner
+                } else {
+                    planner
+                };
+                if !self.push_longer
+                    && matches!(self.task, Task::Trajectory { .. })
+                    && c.steer_centroid_pushes
+                {
+                    // Wider and wider until some push qualifies; else the full search.
+                    let steered = [1.0, 2.0, 4.0]
+                        .into_iter()
+                        .find_map(|k| self.plan_steered(est, target, k * c.steer_max_deg));
+                    if steered.is_some() {
+                        return steered;
+                    }
+                }
+                let goal = match self.task {
+                    Task::Place { goal } => Goal::Place { pose: *goal },
+                    Task::Trajectory { .. } => Goal::Reach { target },
+                };
+                let plan = planner.plan(ag, est.pose, &goal)?;
+                Some(PushOrder {
+                    retry: self.push_longer,
+                    start: plan.start,
+                    duration: plan.fraction * c.push.push_duration,
+                    prediction: Some(plan.prediction),
+                    orbit: *start_radius,
+                })
+            }
+            Brain::Baseline { radius } => {
+                let centre = est.position();
+                let to = target - centre;
+                let dir = if to.length() > 1e-6 {
+                    to.normalize()
+                } else {
+                    DVec2::X
+                };
+                let r = radius.unwrap_or(0.06) + self.run.robot.body_radius + c.start_gap_m;
+                let s = centre - r * dir;
+                // The object moves about as far as the robot drives once they touch.
+                let duration = if self.push_longer {
+                    c.push.push_duration
+                } else {
+                    (to.length() / c.push.push_speed).clamp(0.1, c.push.push_duration)
+                };
+                Some(PushOrder {
+                    retry: self.push_longer,
+                    start: Pose2::new(s.x, s.y, dir.to_angle()),
+                    duration,
+                    prediction: None,
+                    orbit: r,
+                })
+            }
+        }
+    }
+
+    /// Trajectory: a push through the centroid (alpha 0, the baseline's kind) whose
+    /// predicted motion heads for `target`: among the contacts whose push runs within
+    /// `steer_max_deg` of the target's direction, the one the AG predicts to move the
+    /// centroid most nearly at the target (the AG corrects the drift of a centroid push),
+    /// its length from the predicted displacement. `None` if no push runs within
+    /// `max_deg` of the target's direction.
+    fn plan_steered(&self, est: &Estimate, target: DVec2, max_deg: f64) -> Option<PushOrder> {
+        let Brain::Gradient {
+            ag,
+            planner,
+            start_radius,
+            ..
+        } = &self.brain
+        else {
+            return None;
+        };
+        let c = self.run.config;
+        let to = target - est.position();
+        let want = to.to_angle();
+        let rot = DVec2::from_angle(est.pose.theta);
+        let k = planner.settings().fraction_offset;
+        let mut best: Option<(f64, DVec2, f64, Prediction)> = None;
+        for &contact in planner.contacts() {
+            let push_dir = rot.rotate(-contact).to_angle();
+            if agp_world::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
+                continue;
+            }
+            let Some(p) = ag.predict(contact, 0.0) else {
+                continue;
+            };
+            if p.confidence < planner.settings().min_confidence || p.displacement.length() < 1e-3 {
+                continue;
+            }
+            let moved = rot.rotate(p.displacement);
+            // The push length that brings the centroid to the target (within the learned
+            // push), by the offset model of PushChoiceSettings.
+            let scale = (to.length() / moved.length()).clamp(0.2, 1.0);
+            let f = (scale * (1.0 + k) - k).clamp(0.1, 1.0);
+            let s = (f + k) / (1.0 + k);
+            let off = agp_world::wrap_angle(moved.to_angle() - want).abs()
+                + c.reach_rotation_weight_m_per_rad / STEER_LEVER_M * p.rotation_rad.abs();
+            if best.is_none_or(|b| off < b.0) {
+                let scaled = Prediction {
+                    displacement: p.displacement * s,
+                    rotation_rad: p.rotation_rad * s,
+                    ..p
+                };
+                best = Some((off, contact, f, scaled));
+            }
+        }
+        let (_, contact, f, prediction) = best?;
+        let (s, h) = crate::approach_start(contact, 0.0, *start_radius)?;
+        let sw = est.position() + rot.rotate(s);
+        Some(PushOrder {
+            retry: false,
+            start: Pose2::new(sw.x, sw.y, agp_world::wrap_angle(h + est.pose.theta)),
+            duration: f * c.push.push_duration,
+            prediction: Some(prediction),
+            orbit: *start_radius,
+        })
+    }
+
+    /// updateEstimate: the AG's prediction (or, for the baseline, the robot's own travel
+    /// while pushing), corrected by where the robot stopped.
+    fn update(&self, est: Estimate, order: &PushOrder, done: PushDone) -> Estimate {
+        let c = self.run.config;
+        match (&self.brain, order.prediction) {
+            (Brain::Gradient { matcher, .. }, Some(p)) => {
+                let predicted = p.apply_to(est.pose);
+                let corrected = if c.contact_correction {
+                    touch_correction(
+                        matcher.border_points(),
+                        predicted,
+                        done.end,
+                        &self.run.robot,
+                    )
+                } else {
+                    Some(predicted)
+                };
+                // The push did not end against the object where the prediction has it: it
+                // went otherwise than predicted (a glancing contact, an estimate already
+                // off); only a circling can tell where the object is.
+                let surprised = corrected.is_none() || !ended_in_contact(&done);
+                if surprised {
+                    self.trace(format_args!(
+                        "surprised: front gap {:?}, correction trusted {}",
+                        done.front_gap,
+                        corrected.is_some()
+                    ));
+                }
+                Estimate {
+                    pose: corrected.unwrap_or(predicted),
+                    error_m: if surprised { f64::INFINITY } else { 0.0 }
+                        + est.error_m
+                        + c.error_growth * p.displacement.length()
+                        + p.displacement_spread_m
+                        + c.error_floor_m,
+                    error_rad: est.error_rad
+                        + c.error_growth * p.rotation_rad.abs()
+                        + p.rotation_spread_rad
+                        + c.error_floor_rad,
+                    pushes_since: est.pushes_since + 1,
+                }
+            }
+            _ => {
+                let moved = done.end.position() - done.contact.position();
+                let p = est.position() + moved;
+                let surprised = !ended_in_contact(&done);
+                Estimate {
+                    pose: Pose2::new(p.x, p.y, est.pose.theta),
+                    error_m: if surprised { f64::INFINITY } else { 0.0 }
+                        + est.error_m
+                        + c.error_growth * moved.length()
+                        + c.error_floor_m,
+                    error_rad: est.error_rad,
+                    pushes_since: est.pushes_since + 1,
+                }
+            }
+        }
+    }
+
+    /// EstimateOrientationObj: face the estimated centroid (if any), approach to the
+    /// circling's gap, circle once, and match the border to S (or, for the baseline, take
+    /// the centroid of the circled border). `None` if the circling found too little.
+    fn estimate(&mut self, guess: Option<Pose2>) -> Option<Estimate> {
+        self.circlings += 1;
+        let gap = self.run.config.circle.gap + 0.002;
+        // Drive at most a little past the guessed centroid: a guess far off must not send
+        // the robot away.
+        let mut timeout = 5.0;
+        if let Some(g) = guess {
+            let centre = DVec2::new(g.x, g.y);
+            self.run.face(centre);
+            let d = (centre - self.run.pose().position()).length();
+            timeout = ((d + 0.05) / self.run.config.push.approach_speed).min(timeout);
+        }
+        if !self.run.approach_to_gap(gap, timeout) {
+            self.trace(format_args!("approach saw nothing"));
+            return None;
+        }
+        let Some(points) = self.run.circle() else {
+            self.trace(format_args!("circling failed"));
+            return None;
+        };
+        self.trace(format_args!("circled: {} points", points.len()));
+        match &mut self.brain {
+            Brain::Gradient { matcher, .. } => {
+                let pose = match_pose(matcher, &points, guess);
+                self.trace(format_args!(
+                    "estimate {:?} (guess {:?})",
+                    pose.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
+                    guess.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
+                ));
+                Some(Estimate::fresh(pose?))
+            }
+            Brain::Baseline { radius } => {
+                let c = border_centroid(&points)?;
+                let r = points.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
+                radius.get_or_insert(r);
+                let theta = guess.map_or(0.0, |g| g.theta);
+                Some(Estimate::fresh(Pose2::new(c.x, c.y, theta)))
+            }
+        }
+    }
+}
+
+/// Whether the IR still sees the object just ahead once the push is over.
+fn ended_in_contact(done: &PushDone) -> bool {
+    done.front_gap.is_some_and(|g| g <= 0.01)
+}
+
+/// Where the robot was when the push's contact was inferred and when it ended (its own
+/// estimate).
+#[derive(Debug, Clone, Copy)]
+struct PushDone {
+    contact: Pose,
+    end: Pose,
+    /// The front gap the IR sees once the object has come to rest, m.
+    front_gap: Option<f64>,
+}
+
+/// The simulation as the robot drives it, with the robot's own pose estimate.
+struct Run<'a> {
+    sim: Sim,
+    robot: RobotDescription,
+    sense: ContactSense,
+    localizer: RobotLocalizer,
+    config: &'a EpisodeConfig,
+    samples: Vec<PoseSample>,
+    recording: bool,
+}
+
+impl Run<'_> {
+    /// The robot's pose as it knows it (odometry and the overhead fix).
+    fn pose(&mut self) -> Pose {
+        let s = self.sim.sensors();
+        self.localizer.update(s.odometry, s.fix, s.fix_seq)
+    }
+
+    fn record(&mut self) {
+        let p = self.sim.object_pose();
+        self.samples.push(PoseSample {
+            t_s: self.sim.sim_time(),
+            pose: Pose2::new(p.x, p.y, p.theta),
+        });
+    }
+
+    fn step(&mut self, left: f64, right: f64) {
+        self.sim.step(left, right);
+        if self.recording
+            && self
+                .sim
+                .step_count()
+                .is_multiple_of(self.config.record_every_steps.max(1))
+        {
+            self.record();
+        }
+    }
+
+    /// Turns in place to face `point`.
+    fn face(&mut self, point: DVec2) {
+        let pose = self.pose();
+        let heading = (point - pose.position()).to_angle();
+        let mut travel = TravelRoutine::new(
+            self.config.travel,
+            self.robot.axle_length,
+            self.robot.max_wheel_speed,
+            Vec::new(),
+            heading,
+        );
+        self.drive_travel(&mut travel, 10.0);
+    }
+
+    /// Drives forward until the front gap is at most `gap` (m), or stops shrinking while
+    /// the object is in sight (a corner met head-on slips between the front rays: the
+    /// robot would push it), or `timeout` s pass.
+    fn approach_to_gap(&mut self, gap: f64, timeout: f64) -> bool {
+        let t0 = self.sim.sim_time();
+        let speed = self.config.push.approach_speed;
+        // The front gap at each of the last IR samples, newest first.
+        let mut gaps = [None; 6];
+        let mut last_sample = None;
+        while self.sim.sim_time() - t0 < timeout {
+            let s = *self.sim.sensors();
+            let now = self.sense.front_gap(&s.ir_raw);
+            if now.is_some_and(|g| g <= gap) {
+                return true;
+            }
+            if last_sample != Some(s.ir_sample) {
+                last_sample = Some(s.ir_sample);
+                gaps.rotate_right(1);
+                gaps[0] = now;
+                if let (Some(a), Some(b)) = (gaps[0], gaps[5]) {
+                    // A free approach closes 5 samples' travel (6 mm at 80 mm/s).
+                    let expected = speed * 5.0 / self.robot.ir_rate_hz;
+                    if b - a < 0.25 * expected {
+                        return true;
+                    }
+                }
+            }
+            self.step(speed, speed);
+        }
+        false
+    }
+
+    /// One circling; the border points (robot's frame) if the lap closed or gave enough.
+    fn circle(&mut self) -> Option<Vec<DVec2>> {
+        let mut routine = CircleRoutine::new(self.config.circle, &self.robot, self.sim.sim_time());
+        loop {
+            let pose = self.pose();
+            let s = *self.sim.sensors();
+            let (l, r) = routine.update(self.sim.sim_time(), s.ir_sample, pose, &s.ir_raw);
+            if let CirclePhase::Done { outcome, .. } = routine.phase() {
+                let points = routine.border_points();
+                let enough = points.len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
+                return (outcome == CircleOutcome::Closed
+                    || (outcome == CircleOutcome::Timeout && enough))
+                    .then(|| points.to_vec());
+            }
+            self.step(l, r);
+        }
+    }
+
+    /// Backs off after a push.
+    fn backoff(&mut self) {
+        let t0 = self.sim.sim_time();
+        let v = -self.config.backoff_speed;
+        while self.sim.sim_time() - t0 < self.config.backoff_s {
+            self.step(v, v);
+        }
+    }
+
+    /// Out to the circle of radius `orbit` round `centre`, along it, and into `start`.
+    fn travel(&mut self, centre: DVec2, orbit: f64, start: Pose2) -> bool {
+        let pose = self.pose();
+        let target = DVec2::new(start.x, start.y);
+        let way = orbit_waypoints(
+            pose.position(),
+            centre,
+            orbit,
+            target,
+            self.config.travel.arc_step,
+        );
+        let mut travel = TravelRoutine::new(
+            self.config.travel,
+            self.robot.axle_length,
+            self.robot.max_wheel_speed,
+            way,
+            start.theta,
+        );
+        self.drive_travel(&mut travel, 30.0)
+    }
+
+    fn drive_travel(&mut self, travel: &mut TravelRoutine, timeout: f64) -> bool {
+        let t0 = self.sim.sim_time();
+        while self.sim.sim_time() - t0 < timeout {
+            let pose = self.pose();
+            let (l, r) = travel.update(pose);
+            if travel.phase() == TravelPhase::Done {
+                return true;
+            }
+            self.step(l, r);
+        }
+        false
+    }
+
+    /// Approach until the IR says contact, then push for `duration` s; `None` if the
+    /// approach saw nothing close.
+    fn push(&mut self, duration: f64, reach: f64, stall_contact: bool) -> Option<PushDone> {
+        // A push that misses must not drive far past the object.
+        let settings = PushSettings {
+            push_duration: duration,
+            stall_contact,
+            approach_timeout: self
+                .config
+                .push
+                .approach_timeout
+                .min(reach / self.config.push.approach_speed),
+            ..self.config.push
+        };
+        let mut routine = PushRoutine::new(settings, self.sim.sim_time());
+        let mut contact = None;
+        loop {
+            let pose = self.pose();
+            let s = *self.sim.sensors();
+            let (l, r) = routine.update(&self.sense, self.sim.sim_time(), s.ir_sample, &s.ir_raw);
+            match routine.phase() {
+                PushPhase::Push { .. } => {
+                    if contact.is_none() {
+                        contact = Some(pose);
+                        self.recording = true;
+                    }
+                }
+                PushPhase::Done { contact: touched } => {
+                    self.recording = false;
+                    // Let the object come to rest before anything is read off it.
+                    let t0 = self.sim.sim_time();
+                    while self.sim.sim_time() - t0 < 0.2 {
+                        self.step(0.0, 0.0);
+                    }
+                    let end = self.pose();
+                    let front_gap = self.sense.front_gap(&self.sim.sensors().ir_raw);
+                    return match (touched, contact) {
+                        (true, Some(contact)) => Some(PushDone {
+                            contact,
+                            end,
+                            front_gap,
+                        }),
+                        _ => None,
+                    };
+                }
+                PushPhase::Approach { .. } => {}
+            }
+            self.step(l, r);
+        }
+    }
+}
+
+/// The pose from circled border points: ShapeMatcher against S. When the runner-up fits
+/// about as well and is nearer to `guess`, the runner-up (the points do not tell them
+/// apart; the last estimate does). `None` when too few points fit the learned border.
+fn match_pose(matcher: &mut ShapeMatcher, points: &[DVec2], guess: Option<Pose2>) -> Option<Pose2> {
+    let m = matcher.match_points(points).ok()?;
+    let period = matcher.symmetry_period_rad();
+    let mut best = m.best;
+    if let (Some(g), Some(r)) = (guess, m.runner_up) {
+        let off = |p: &agp_affordance::MatchedPose| {
+            (p.position - DVec2::new(g.x, g.y)).length()
+                + 0.05 * symmetric_period_distance(p.orientation_rad - g.theta, period)
+        };
+        if r.rms_error_m <= 1.3 * best.rms_error_m && off(&r) + 0.01 < off(&best) {
+            best = r;
+        }
+    }
+    if best.inlier_fraction < 0.6 {
+        return None;
+    }
+    Some(Pose2::new(
+        best.position.x,
+        best.position.y,
+        best.orientation_rad,
+    ))
+}
+
+fn symmetric_period_distance(a: f64, period: f64) -> f64 {
+    let d = a.rem_euclid(period);
+    d.min(period - d)
+}
+
+/// Moves the predicted `pose` along the robot's heading so that the object's learned
+/// border (object frame) touches the robot's body where the robot stopped (`robot`, its
+/// own estimate): the push ends in contact. `None` when the correction would exceed
+/// 15 mm: the push did not go as predicted.
+fn touch_correction(
+    border: &[DVec2],
+    pose: Pose2,
+    robot_pose: Pose,
+    robot: &RobotDescription,
+) -> Option<Pose2> {
+    let u = DVec2::from_angle(robot_pose.theta);
+    let rot = DVec2::from_angle(pose.theta);
+    let mut centre = DVec2::new(pose.x, pose.y);
+    let mut total = 0.0;
+    for _ in 0..3 {
+        let nearest = border
+            .iter()
+            .map(|b| (centre + rot.rotate(*b) - robot_pose.position()).length())
+            .fold(f64::INFINITY, f64::min);
+        if !nearest.is_finite() {
+            return None;
+        }
+        let shift = nearest - robot.body_radius;
+        centre -= shift * u;
+        total += shift;
+    }
+    (total.abs() <= 0.015).then(|| Pose2::new(centre.x, centre.y, pose.theta))
+}
+
+/// The centroid of the area a circled border encloses: the points binned by angle round
+/// their mean (2 deg bins, the mean of each), the bins' means as a polygon. Good for
+/// shapes star-shaped from their centroid; off by a few mm on the L's inner corner.
+pub fn border_centroid(points: &[DVec2]) -> Option<DVec2> {
+    const BINS: usize = 180;
+    if points.len() < agp_affordance::MIN_MATCH_POINTS {
+        return None;
+    }
+    let mean = points.iter().sum::<DVec2>() / points.len() as f64;
+    let mut sums = [(DVec2::ZERO, 0usize); BINS];
+    for p in points {
+        let a = (*p - mean).to_angle().rem_euclid(std::f64::consts::TAU);
+        let k = ((a / std::f64::consts::TAU * BINS as f64) as usize).min(BINS - 1);
+        sums[k].0 += *p;
+        sums[k].1 += 1;
+    }
+    let ring: Vec<DVec2> = sums
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(s, n)| *s / *n as f64)
+        .collect();
+    if ring.len() < 3 {
+        return None;
+    }
+    let (mut area, mut c) = (0.0, DVec2::ZERO);
+    for k in 0..ring.len() {
+        let (a, b) = (ring[k], ring[(k + 1) % ring.len()]);
+        let cross = a.perp_dot(b);
+        area += cross;
+        c += (a + b) * cross;
+    }
+    (area.abs() > 1e-9).then(|| c / (3.0 * area))
+}
+
+/// The point `ahead` (m) along `path` past the projection of `p` on it (the end if
+/// beyond).
+pub fn lookahead_point(path: &[DVec2], p: DVec2, ahead: f64) -> DVec2 {
+    let Some(&last) = path.last() else {
+        return p;
+    };
+    // The projection: arc length of the closest point.
+    let (mut best_d, mut best_s, mut s0) = (f64::INFINITY, 0.0, 0.0);
+    for w in path.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let ab = b - a;
+        let len = ab.length();
+        let t = if len > 1e-12 {
+            ((p - a).dot(ab) / (len * len)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + t * ab - p).length();
+        if d < best_d {
+            best_d = d;
+            best_s = s0 + t * len;
+        }
+        s0 += len;
+    }
+    let mut s = best_s + ahead;
+    for w in path.windows(2) {
+        let len = (w[1] - w[0]).length();
+        if s <= len && len > 1e-12 {
+            return w[0] + (w[1] - w[0]) * (s / len);
+        }
+        s -= len;
+    }
+    last
+}
+
+/// Distance from `p` to the closest point of the polyline `path`, m.
+pub fn distance_to_path(path: &[DVec2], p: DVec2) -> f64 {
+    match path {
+        [] => f64::INFINITY,
+        [a] => (p - *a).length(),
+        _ => path
+            .windows(2)
+            .map(|w| agp_world::point_segment_distance(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lookahead_point_runs_along_the_path_and_stops_at_its_end() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.3)];
+        let p = lookahead_point(&path, DVec2::new(0.1, 0.02), 0.05);
+        assert!((p - DVec2::new(0.15, 0.0)).length() < 1e-12, "{p}");
+        // Round the corner: 0.28 + 0.05 is 0.03 up the second segment.
+        let p = lookahead_point(&path, DVec2::new(0.28, -0.01), 0.05);
+        assert!((p - DVec2::new(0.3, 0.03)).length() < 1e-12, "{p}");
+        let p = lookahead_point(&path, DVec2::new(0.31, 0.29), 0.05);
+        assert_eq!(p, DVec2::new(0.3, 0.3));
+    }
+
+    #[test]
+    fn the_distance_to_a_path_is_to_its_closest_segment() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.3)];
+        assert!((distance_to_path(&path, DVec2::new(0.1, 0.02)) - 0.02).abs() < 1e-12);
+        assert!((distance_to_path(&path, DVec2::new(0.32, 0.1)) - 0.02).abs() < 1e-12);
+        assert!((distance_to_path(&path, DVec2::new(-0.03, -0.04)) - 0.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_border_centroid_of_a_square_ring_is_its_centre() {
+        let c = DVec2::new(0.2, -0.1);
+        let points: Vec<DVec2> = (0..400)
+            .map(|k| {
+                let s = k as f64 / 100.0;
+                let (side, t) = (s.floor() as usize, s.fract() - 0.5);
+                let q = match side {
+                    0 => DVec2::new(0.03, 0.06 * t),
+                    1 => DVec2::new(-0.06 * t, 0.03),
+                    2 => DVec2::new(-0.03, -0.06 * t),
+                    _ => DVec2::new(0.06 * t, -0.03),
+                };
+                c + q
+            })
+            .collect();
+        let got = border_centroid(&points).expect("a centroid");
+        assert!((got - c).length() < 1e-4, "{got}");
+    }
+
+    #[test]
+    fn a_predicted_pose_is_moved_along_the_push_until_its_border_touches_the_robot() {
+        let robot = RobotDescription::epuck();
+        // A square of 60 mm, its -x face 10 mm ahead of the robot's shell.
+        let border: Vec<DVec2> = (0..60)
+            .map(|k| DVec2::new(-0.03, -0.03 + k as f64 * 0.001))
+            .collect();
+        let robot_pose = Pose::new(0.0, 0.0, 0.0);
+        let pose = Pose2::new(robot.body_radius + 0.01 + 0.03, 0.0, 0.0);
+        let got = touch_correction(&border, pose, robot_pose, &robot).expect("trusted");
+        assert!((got.x - (robot.body_radius + 0.03)).abs() < 1e-6, "{got:?}");
+        // 20 mm off is not trusted.
+        let far = Pose2::new(robot.body_radius + 0.02 + 0.03, 0.0, 0.0);
+        assert_eq!(touch_correction(&border, far, robot_pose, &robot), None);
+    }
+
+    #[test]
+    fn planner_names_parse_back() {
+        for k in PlannerKind::ALL {
+            assert_eq!(k.name().parse::<PlannerKind>(), Ok(k));
+        }
+        assert!("magic".parse::<PlannerKind>().is_err());
+    }
+}

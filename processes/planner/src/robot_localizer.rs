@@ -1,0 +1,100 @@
+//! The robot's own pose as the robot knows it: wheel odometry, pulled towards each overhead
+//! fix (robot-and-world.md). Nothing here sees the object.
+
+use agp_world::{Pose, wrap_angle};
+use glam::DVec2;
+
+/// Odometry corrected by the overhead fixes: the pose is `offset ∘ odometry`, and each new
+/// fix moves the offset so that the pose goes `gain` of the way to the fix.
+///
+/// Odometry drifts without bound; a fix is noisy (about 1 mm and 0.5 deg) but does not
+/// drift. Blending each fix in part keeps the pose smooth (the routines steer by it) while
+/// the drift stays bounded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotLocalizer {
+    /// Rotation of the offset, rad.
+    rotation: f64,
+    /// Translation of the offset, m.
+    translation: DVec2,
+    last_fix_seq: u64,
+    gain: f64,
+}
+
+impl RobotLocalizer {
+    /// A localizer that trusts odometry as it is until the first fix; `gain` in (0, 1].
+    #[track_caller]
+    pub fn new(gain: f64) -> Self {
+        assert!(
+            gain > 0.0 && gain <= 1.0,
+            "the fix gain must be in (0, 1], got {gain}"
+        );
+        Self {
+            rotation: 0.0,
+            translation: DVec2::ZERO,
+            last_fix_seq: 0,
+            gain,
+        }
+    }
+
+    /// The pose for this odometry, taking the fix in if it is new (`fix_seq` changed and
+    /// is not 0).
+    pub fn update(&mut self, odometry: Pose, fix: Pose, fix_seq: u64) -> Pose {
+        if fix_seq != 0 && fix_seq != self.last_fix_seq {
+            self.last_fix_seq = fix_seq;
+            let now = self.apply(odometry);
+            let k = self.gain;
+            let target_theta = now.theta + k * wrap_angle(fix.theta - now.theta);
+            let target_pos = now.position().lerp(fix.position(), k);
+            self.rotation = wrap_angle(target_theta - odometry.theta);
+            self.translation =
+                target_pos - DVec2::from_angle(self.rotation).rotate(odometry.position());
+        }
+        self.apply(odometry)
+    }
+
+    /// The pose for this odometry with the present offset.
+    pub fn apply(&self, odometry: Pose) -> Pose {
+        let p = self.translation + DVec2::from_angle(self.rotation).rotate(odometry.position());
+        Pose::new(p.x, p.y, wrap_angle(odometry.theta + self.rotation))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn without_a_fix_the_pose_is_odometry() {
+        let mut l = RobotLocalizer::new(0.5);
+        let o = Pose::new(0.1, -0.2, 0.3);
+        assert_eq!(l.update(o, Pose::default(), 0), o);
+    }
+
+    #[test]
+    fn a_fix_with_full_gain_moves_the_pose_onto_it_and_odometry_moves_it_on_from_there() {
+        let mut l = RobotLocalizer::new(1.0);
+        let fix = Pose::new(1.0, 1.0, 1.0);
+        let p = l.update(Pose::new(0.0, 0.0, 0.0), fix, 1);
+        assert!((p.position() - fix.position()).length() < 1e-12);
+        assert!(wrap_angle(p.theta - fix.theta).abs() < 1e-12);
+        // Odometry drives 0.1 m straight ahead: the pose drives 0.1 m along its heading.
+        let q = l.update(Pose::new(0.1, 0.0, 0.0), fix, 1);
+        let expected = fix.position() + 0.1 * DVec2::from_angle(1.0);
+        assert!((q.position() - expected).length() < 1e-12, "{q:?}");
+    }
+
+    #[test]
+    fn a_fix_with_half_gain_moves_the_pose_half_way() {
+        let mut l = RobotLocalizer::new(0.5);
+        let p = l.update(Pose::new(0.0, 0.0, 0.0), Pose::new(0.002, 0.0, 0.02), 3);
+        assert!(
+            (p.x - 0.001).abs() < 1e-12 && (p.theta - 0.01).abs() < 1e-12,
+            "{p:?}"
+        );
+        // The same fix again changes nothing.
+        assert_eq!(
+            l.update(Pose::new(0.0, 0.0, 0.0), Pose::new(0.0, 0.0, 0.0), 3),
+            p
+        );
+    }
+}

@@ -1,0 +1,166 @@
+//! Episodes of the benchmark tasks in-process against the physics library: the paper's
+//! Algorithm 5 with the three planners, judged by ground truth.
+//!
+//! The gradient is learned from ground truth (true poses, true aim points) with the
+//! paper's protocol and the episodes' own push, so that these tests isolate the planner
+//! and its IR-only pose estimates from the estimator's learning (tested in
+//! `agp-estimator`).
+
+mod common;
+
+use agp_affordance::AffordanceGradient;
+use agp_planner::{
+    EpisodeConfig, EpisodeEnd, PlannerKind, Task, place_goals, run_episode, trajectory_error,
+    trajectory_path,
+};
+use agp_shared_types::Pose2;
+use agp_world::{RobotDescription, Scenario};
+use glam::DVec2;
+
+fn setup(name: &str) -> (Scenario, RobotDescription, AffordanceGradient) {
+    let scenario = Scenario::builtin(name).expect("built-in");
+    let robot = RobotDescription::epuck();
+    let ag = common::learn_from_truth(&scenario, &robot);
+    (scenario, robot, ag)
+}
+
+/// Runs `planner` on `goals` (sensor noise seeded per episode); how many were placed.
+fn placed(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    ag: &AffordanceGradient,
+    planner: PlannerKind,
+    goals: &[Pose2],
+) -> usize {
+    let base = EpisodeConfig::for_scenario(scenario);
+    goals
+        .iter()
+        .enumerate()
+        .filter(|(k, goal)| {
+            let config = EpisodeConfig {
+                seed: base.seed + *k as u64,
+                ..base.clone()
+            };
+            let task = Task::Place { goal: **goal };
+            let r = run_episode(scenario, robot, Some(ag), planner, &task, &config)
+                .expect("the episode runs");
+            println!(
+                "{planner} to ({:.0}, {:.0}) mm, {:.0} deg: {} ({}) after {} pushes, {} circlings, \
+                 error {:.1} mm, {:.1} deg",
+                goal.x * 1e3,
+                goal.y * 1e3,
+                goal.theta.to_degrees(),
+                if r.success { "placed" } else { "NOT placed" },
+                r.end.name(),
+                r.pushes,
+                r.circlings,
+                r.position_error_mm,
+                r.orientation_error_deg
+            );
+            r.success
+        })
+        .count()
+}
+
+#[test]
+fn the_oracle_places_the_triangle_at_every_goal() {
+    let (scenario, robot, ag) = setup("triangle");
+    let goals = place_goals(&scenario, 4, 11);
+    let n = placed(&scenario, &robot, &ag, PlannerKind::Oracle, &goals);
+    assert_eq!(n, goals.len(), "the oracle placed {n} of {}", goals.len());
+}
+
+#[test]
+fn with_ir_only_estimates_the_affordance_planner_places_the_triangle_in_five_of_six_episodes() {
+    let (scenario, robot, ag) = setup("triangle");
+    let goals = place_goals(&scenario, 6, 5);
+    let n = placed(&scenario, &robot, &ag, PlannerKind::Affordance, &goals);
+    assert!(n >= 5, "placed {n} of {}", goals.len());
+}
+
+#[test]
+fn with_ir_only_estimates_the_affordance_planner_places_the_l_in_three_of_four_episodes() {
+    let (scenario, robot, ag) = setup("lshape");
+    let goals = place_goals(&scenario, 4, 5);
+    let n = placed(&scenario, &robot, &ag, PlannerKind::Affordance, &goals);
+    assert!(n >= 3, "placed {n} of {}", goals.len());
+}
+
+#[test]
+fn the_baselines_centroid_pushes_bring_the_object_towards_the_goal_without_a_gradient() {
+    let scenario = Scenario::builtin("triangle").expect("built-in");
+    let robot = RobotDescription::epuck();
+    let goal = Pose2::new(0.3, 0.2, 1.0);
+    let config = EpisodeConfig {
+        max_pushes: 3,
+        ..EpisodeConfig::for_scenario(&scenario)
+    };
+    // No gradient at all: the baseline does not need one.
+    let r = run_episode(
+        &scenario,
+        &robot,
+        None,
+        PlannerKind::Baseline,
+        &Task::Place { goal },
+        &config,
+    )
+    .expect("the baseline runs without a gradient");
+    assert_eq!(r.end, EpisodeEnd::MaxPushes);
+    let start = DVec2::new(goal.x, goal.y).length();
+    let end = r.position_error_mm * 1e-3;
+    // Three pushes of about 45 mm each, through the centroid towards the goal.
+    assert!(
+        start - end > 0.1,
+        "the object came {:.0} mm nearer, from {:.0} to {:.0} mm",
+        (start - end) * 1e3,
+        start * 1e3,
+        end * 1e3
+    );
+}
+
+#[test]
+fn the_affordance_and_oracle_planners_refuse_to_run_without_a_gradient() {
+    let scenario = Scenario::builtin("triangle").expect("built-in");
+    let robot = RobotDescription::epuck();
+    let config = EpisodeConfig::for_scenario(&scenario);
+    let task = Task::Place {
+        goal: Pose2::new(0.3, 0.0, 0.0),
+    };
+    for planner in [PlannerKind::Affordance, PlannerKind::Oracle] {
+        assert!(run_episode(&scenario, &robot, None, planner, &task, &config).is_err());
+    }
+}
+
+#[test]
+fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does() {
+    let (scenario, robot, ag) = setup("lshape");
+    let path = trajectory_path(&scenario);
+    let config = EpisodeConfig::for_scenario(&scenario);
+    let task = Task::Trajectory { path: path.clone() };
+    let mut errors = Vec::new();
+    for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
+        let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
+            .expect("the episode runs");
+        let poses: Vec<Pose2> = r.samples.iter().map(|s| s.pose).collect();
+        let e = trajectory_error(&path, &poses).expect("recorded poses");
+        println!(
+            "{planner}: mean error {:.2} mm over {} points, {} pushes, end {:.1} mm off",
+            e * 1e3,
+            poses.len(),
+            r.pushes,
+            r.position_error_mm
+        );
+        assert!(r.success, "{planner} did not reach the end: {:?}", r.end);
+        // The object is recorded while it is pushed, about every 50 ms: a 600 mm line at
+        // about 45 mm per push is over 50 points.
+        assert!(poses.len() > 50, "{planner}: {} points", poses.len());
+        assert!(e < 0.005, "{planner}: mean error {:.1} mm", e * 1e3);
+        errors.push(e);
+    }
+    assert!(
+        errors[0] < errors[1],
+        "affordance {:.2} mm, baseline {:.2} mm per point",
+        errors[0] * 1e3,
+        errors[1] * 1e3
+    );
+}
