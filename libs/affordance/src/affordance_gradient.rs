@@ -83,7 +83,7 @@ impl AlphaLayer {
         &self.grids[g as usize]
     }
 
-    fn predict(&self, p: DVec2) -> Option<Prediction> {
+    pub(crate) fn predict(&self, p: DVec2) -> Option<Prediction> {
         let b = self.grid(LayerGrid::PushWeight).bilinear(p)?;
         let at = |g: LayerGrid| f64::from(b.apply(self.grid(g).cells()));
         let w = at(LayerGrid::PushWeight);
@@ -264,6 +264,9 @@ impl AffordanceGradient {
     /// push direction deviated by `alpha_deg` from the centroid, for any contact point and
     /// any alpha between the smallest and largest learned ones.
     ///
+    /// [`PushPredictor`](crate::PushPredictor) interpolates between alphas along the pushes
+    /// of one start instead, which follows the physics better.
+    ///
     /// In space: bilinear interpolation of the weighted sums and of the weights, then their
     /// ratio, i.e. a bilinear interpolation of the four cells' weighted means, each cell
     /// counting by its weight. In alpha: linear between the two learned alphas around
@@ -288,7 +291,22 @@ impl AffordanceGradient {
         let hi = self.layers.iter().position(|l| l.alpha_deg > alpha_deg)?;
         let (a, b) = (&self.layers[hi - 1], &self.layers[hi]);
         let t = (alpha_deg - a.alpha_deg) / (b.alpha_deg - a.alpha_deg);
-        match (a.predict(contact_point_obj), b.predict(contact_point_obj)) {
+        Self::blend(
+            a.predict(contact_point_obj),
+            b.predict(contact_point_obj),
+            t,
+        )
+    }
+
+    /// Blends the predictions of two neighbouring alphas at interpolation weight `t` (0: the
+    /// first): linear when both answer, else the one that does with its confidence scaled
+    /// by its weight.
+    pub(crate) fn blend(
+        a: Option<Prediction>,
+        b: Option<Prediction>,
+        t: f64,
+    ) -> Option<Prediction> {
+        match (a, b) {
             (Some(pa), Some(pb)) => Some(pa.lerp(&pb, t)),
             (Some(pa), None) => Some(Prediction {
                 confidence: pa.confidence * (1.0 - t),

@@ -1,4 +1,4 @@
-use agp_affordance::Grid;
+use agp_affordance::{Grid, border_crossing};
 use agp_world::{Pose, RobotDescription, border_range, ir_point_robot, to_frame};
 use glam::DVec2;
 
@@ -121,7 +121,12 @@ impl ContactEstimator {
         ContactEstimates {
             front_ir_mean: self.front_ir_mean(robot_obj, ir_raw),
             body_sweep: body_sweep(robot_obj, self.robot.body_radius, learned.border),
-            heading_line: heading_line(robot_obj, learned.shape, learned.threshold),
+            heading_line: border_crossing(
+                learned.shape,
+                robot_obj.position(),
+                DVec2::from_angle(robot_obj.theta),
+                learned.threshold,
+            ),
             robot_obj,
         }
     }
@@ -160,32 +165,6 @@ fn body_sweep(robot: Pose, radius: f64, border: &[DVec2]) -> Option<DVec2> {
         }
     }
     best.map(|(_, b)| b)
-}
-
-/// The first crossing of the heading line from `robot` (object frame) with the border: the
-/// centre of the first band of `shape` above `threshold` along the line, each sample
-/// weighted by its excess over the threshold. `None` when the line meets no band.
-fn heading_line(robot: Pose, shape: &Grid, threshold: f32) -> Option<DVec2> {
-    let (c, d) = (robot.position(), DVec2::from_angle(robot.theta));
-    let step = 0.25 * shape.cell_size_m();
-    // Far enough to cross the whole grid from anywhere near it.
-    let end = c.length() + shape.extent_m();
-    let mut t = 0.0;
-    while t < end && shape.sample(c + d * t) < threshold {
-        t += step;
-    }
-    let (mut weight, mut moment) = (0.0_f64, 0.0_f64);
-    while t < end {
-        let s = shape.sample(c + d * t);
-        if s < threshold {
-            break;
-        }
-        let w = f64::from(s - threshold);
-        weight += w;
-        moment += w * t;
-        t += step;
-    }
-    (weight > 0.0).then(|| c + d * (moment / weight))
 }
 
 #[cfg(test)]

@@ -17,7 +17,8 @@ use std::f64::consts::{PI, TAU};
 use std::time::Instant;
 
 use agp_affordance::{
-    AffordanceGradient, AffordanceLearner, LearnerBuildError, PushOutcome, SampleAddError,
+    AffordanceGradient, AffordanceLearner, LearnerBuildError, PushOutcome, PushPredictor,
+    SampleAddError,
 };
 use agp_physics::{Sim, SimBuildError, SimConfig};
 use agp_planner::{
@@ -1025,12 +1026,21 @@ pub fn run_object(
     let eval_sim_time_s = sim.sim_time() - t_eval;
     let eval_wall_s = wall.elapsed().as_secs_f64();
     let keyed = |m: ContactMethod| move |e: &EvalPush| e.contact.get(m);
-    let prediction = predict_all(&gradient, &samples, order, keyed(cfg.contact_method));
+    let predictor = PushPredictor::new(&gradient, radius);
+    let prediction = predict_all(&predictor, &samples, order, keyed(cfg.contact_method));
     let prediction_by_method = by_method
         .iter()
-        .map(|(m, g)| (*m, predict_all(g, &samples, order, keyed(*m))))
+        .map(|(m, g)| {
+            let p = PushPredictor::with_shape(g, predictor.shape().clone(), radius);
+            (*m, predict_all(&p, &samples, order, keyed(*m)))
+        })
         .collect();
-    let prediction_truth_learned = predict_all(&truth_learned, &samples, order, |e| e.true_aim);
+    let prediction_truth_learned = predict_all(
+        &PushPredictor::with_shape(&truth_learned, predictor.shape().clone(), radius),
+        &samples,
+        order,
+        |e| e.true_aim,
+    );
     // Rotation error by how far the push's alpha lies from the nearest learned alpha.
     let mut bins: [Vec<f64>; 3] = Default::default();
     if order != 0 {
@@ -1038,7 +1048,7 @@ pub fn run_object(
             let Some(p) = e
                 .contact
                 .get(cfg.contact_method)
-                .and_then(|c| gradient.predict(c, e.alpha_deg))
+                .and_then(|c| predictor.predict(c, e.alpha_deg))
             else {
                 continue;
             };
@@ -1104,7 +1114,7 @@ struct EvalPush {
 
 /// How `g` predicts `samples`, queried at the contact point `key` gives.
 fn predict_all(
-    g: &AffordanceGradient,
+    g: &PushPredictor<'_>,
     samples: &[EvalPush],
     order: u32,
     key: impl Fn(&EvalPush) -> Option<DVec2>,

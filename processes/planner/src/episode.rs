@@ -341,7 +341,6 @@ pub fn run_episode(
                 },
             );
             Brain::Gradient {
-                ag,
                 matcher: Box::new(matcher),
                 planner: push_planner,
                 long_planner,
@@ -425,11 +424,10 @@ pub fn run_episode(
 )]
 enum Brain<'a> {
     Gradient {
-        ag: &'a AffordanceGradient,
         matcher: Box<ShapeMatcher>,
-        planner: PushPlanner,
+        planner: PushPlanner<'a>,
         /// The same with full pushes only (see `Episode::push_longer`).
-        long_planner: PushPlanner,
+        long_planner: PushPlanner<'a>,
         start_radius: f64,
     },
     Baseline {
@@ -699,7 +697,6 @@ impl Episode<'_> {
         let (target, _) = self.target(est);
         match &self.brain {
             Brain::Gradient {
-                ag,
                 planner,
                 long_planner,
                 start_radius,
@@ -726,7 +723,7 @@ impl Episode<'_> {
                     Task::Place { goal } => Goal::Place { pose: *goal },
                     Task::Trajectory { .. } => Goal::Reach { target },
                 };
-                let plan = planner.plan(ag, est.pose, &goal)?;
+                let plan = planner.plan(est.pose, &goal)?;
                 Some(PushOrder {
                     retry: self.push_longer,
                     start: plan.start,
@@ -770,7 +767,6 @@ impl Episode<'_> {
     /// `max_deg` of the target's direction.
     fn plan_steered(&self, est: &Estimate, target: DVec2, max_deg: f64) -> Option<PushOrder> {
         let Brain::Gradient {
-            ag,
             planner,
             start_radius,
             ..
@@ -789,7 +785,7 @@ impl Episode<'_> {
             if agp_world::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
                 continue;
             }
-            let Some(p) = ag.predict(contact, 0.0) else {
+            let Some(p) = planner.predictor().predict(contact, 0.0) else {
                 continue;
             };
             if p.confidence < planner.settings().min_confidence || p.displacement.length() < 1e-3 {

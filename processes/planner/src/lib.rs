@@ -9,6 +9,7 @@ mod push_routine;
 mod robot_localizer;
 mod travel;
 
+pub use agp_affordance::approach_start;
 pub use bench_tasks::{PlannerSummary, median, place_goals, trajectory_error, trajectory_path};
 pub use circle_routine::{CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, Side};
 pub use contact_sense::ContactSense;
@@ -16,9 +17,7 @@ pub use episode::{
     EpisodeConfig, EpisodeEnd, EpisodeResult, EpisodeRunError, PlannerKind, PlannerParseError,
     PoseSample, Task, border_centroid, distance_to_path, lookahead_point, run_episode,
 };
-pub use push_choice::{
-    Goal, PushChoiceSettings, PushPlan, PushPlanner, approach_start, symmetric_angle_error,
-};
+pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use robot_localizer::RobotLocalizer;
 pub use travel::{TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints};

@@ -9,7 +9,7 @@
 //! soon as the turn is worth more than the distance it costs. Shorter pushes are part of
 //! the search, which is what lets the object settle into a 10 mm tolerance.
 
-use agp_affordance::{AffordanceGradient, Prediction};
+use agp_affordance::{AffordanceGradient, Prediction, PushPredictor, approach_start};
 use agp_shared_types::Pose2;
 use agp_world::wrap_angle;
 use glam::DVec2;
@@ -107,16 +107,18 @@ pub struct PushPlan {
 
 /// Chooses pushes for one object from its affordance gradient.
 #[derive(Debug, Clone)]
-pub struct PushPlanner {
+pub struct PushPlanner<'a> {
+    predictor: PushPredictor<'a>,
     settings: PushChoiceSettings,
     contacts: Vec<DVec2>,
     alphas: Vec<f64>,
     radius: f64,
 }
 
-impl PushPlanner {
-    /// Precomputes the contact candidates and the alphas to try (allocates; once per AG).
-    pub fn new(ag: &AffordanceGradient, settings: PushChoiceSettings) -> Self {
+impl<'a> PushPlanner<'a> {
+    /// Precomputes the contact candidates, the alphas to try and the predictor for pushes
+    /// from the start circle (allocates; once per AG).
+    pub fn new(ag: &'a AffordanceGradient, settings: PushChoiceSettings) -> Self {
         let contacts = ag.contact_candidates(settings.contact_count);
         let radius = contacts.iter().map(|c| c.length()).fold(0.0, f64::max);
         let learned: Vec<f64> = ag.alphas_deg().collect();
@@ -131,11 +133,18 @@ impl PushPlanner {
             }
         }
         Self {
+            predictor: PushPredictor::new(ag, settings.start_radius_m),
             settings,
             contacts,
             alphas,
             radius,
         }
+    }
+
+    /// What the search predicts pushes with: pushes from the start circle, interpolated
+    /// between learned alphas along each start (see [`PushPredictor`]).
+    pub fn predictor(&self) -> &PushPredictor<'a> {
+        &self.predictor
     }
 
     pub fn settings(&self) -> &PushChoiceSettings {
@@ -196,11 +205,11 @@ impl PushPlanner {
 
     /// The push whose predicted outcome is closest to `goal` from the object's estimated
     /// pose `estimate` (world frame); `None` if the AG predicts nothing anywhere.
-    pub fn plan(&self, ag: &AffordanceGradient, estimate: Pose2, goal: &Goal) -> Option<PushPlan> {
+    pub fn plan(&self, estimate: Pose2, goal: &Goal) -> Option<PushPlan> {
         let mut best: Option<PushPlan> = None;
         for &c in &self.contacts {
             for &alpha in &self.alphas {
-                let Some(p) = ag.predict(c, alpha) else {
+                let Some(p) = self.predictor.predict(c, alpha) else {
                     continue;
                 };
                 if p.confidence < self.settings.min_confidence {
@@ -244,84 +253,9 @@ pub fn symmetric_angle_error(angle: f64, order: u32) -> f64 {
     if a > 0.5 * period { a - period } else { a }
 }
 
-/// Where on the centroid-centred circle of radius `radius` a push with deviation
-/// `alpha_deg` must start so that the robot's heading line goes through `contact_obj`:
-/// the start position and heading, object frame. The heading is the direction to the
-/// centroid turned by alpha (counter-clockwise positive), as in the learning trials.
-///
-/// Of the starts whose line passes through the contact ahead of the robot, the one
-/// nearest to the contact (the contact is then on the near side of the object). `None`
-/// if no start reaches the contact (it is outside the circle, or alpha is too large for
-/// a contact that close to the centroid's line).
-pub fn approach_start(contact_obj: DVec2, alpha_deg: f64, radius: f64) -> Option<(DVec2, f64)> {
-    if !(contact_obj.is_finite() && alpha_deg.is_finite() && radius > contact_obj.length()) {
-        return None;
-    }
-    let alpha = alpha_deg.to_radians();
-    // With u the heading and s the start, u = rot(alpha)(-s / |s|) gives
-    // u x s = radius sin(alpha), and c = s + t u on the line gives u x c = u x s; with
-    // gamma the angle of c that is |c| sin(gamma - h) = radius sin(alpha).
-    let q = radius * alpha.sin() / contact_obj.length();
-    if !(-1.0..=1.0).contains(&q) {
-        return None;
-    }
-    let gamma = contact_obj.to_angle();
-    let mut best: Option<(f64, DVec2, f64)> = None;
-    for h in [gamma - q.asin(), gamma - std::f64::consts::PI + q.asin()] {
-        let u = DVec2::from_angle(h);
-        // |c - t u| = radius with t > 0: the positive root (|c| < radius).
-        let cu = contact_obj.dot(u);
-        let t = cu + (cu * cu - contact_obj.length_squared() + radius * radius).sqrt();
-        let s = contact_obj - t * u;
-        // The deviation is alpha, not pi - alpha: the robot heads towards the centroid.
-        if t > 0.0 && u.dot(-s) > 0.0 && best.is_none_or(|b| t < b.0) {
-            best = Some((t, s, wrap_angle(h)));
-        }
-    }
-    best.map(|(_, s, h)| (s, h))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_straight_push_starts_on_the_contacts_own_ray() {
-        let c = DVec2::new(0.03, 0.04);
-        let (s, h) = approach_start(c, 0.0, 0.1).expect("a start");
-        assert!((s - c.normalize() * 0.1).length() < 1e-9, "{s}");
-        assert!(
-            (wrap_angle(h - (-c).to_angle())).abs() < 1e-9,
-            "heading {h} is not towards the centroid"
-        );
-    }
-
-    #[test]
-    fn an_alpha_push_starts_where_its_line_meets_the_contact_at_that_alpha() {
-        for alpha in [-15.0_f64, -7.5, 5.0, 15.0] {
-            for c in [
-                DVec2::new(-0.05, 0.0),
-                DVec2::new(0.02, -0.04),
-                DVec2::new(0.0, 0.057),
-            ] {
-                let r = 0.1;
-                let (s, h) = approach_start(c, alpha, r).expect("a start");
-                assert!((s.length() - r).abs() < 1e-9);
-                let u = DVec2::from_angle(h);
-                // The heading line passes through the contact, ahead of the robot...
-                assert!(u.perp_dot(c - s).abs() < 1e-7, "alpha {alpha}, c {c}");
-                assert!(u.dot(c - s) > 0.0);
-                // ...and makes the angle alpha with the direction to the centroid.
-                let dev = wrap_angle(h - (-s).to_angle()).to_degrees();
-                assert!((dev - alpha).abs() < 1e-6, "deviation {dev} vs {alpha}");
-            }
-        }
-    }
-
-    #[test]
-    fn a_contact_outside_the_start_circle_has_no_start() {
-        assert!(approach_start(DVec2::new(0.2, 0.0), 0.0, 0.1).is_none());
-    }
 
     #[test]
     fn orientation_errors_wrap_by_the_objects_symmetry() {

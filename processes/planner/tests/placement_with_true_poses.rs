@@ -146,7 +146,7 @@ fn place(scenario: &Scenario, ag: &AffordanceGradient, goal: Pose2, max_pushes: 
             };
         }
         let object = pose2(sim.object_pose());
-        let plan = planner.plan(ag, object, &target).expect("a push");
+        let plan = planner.plan(object, &target).expect("a push");
         // Back off, then round the object to the push's start.
         for _ in 0..(0.15 / dt).round() as u64 {
             sim.step(-0.08, -0.08);

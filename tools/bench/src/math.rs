@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use agp_affordance::{
     AffordanceGradient, AffordanceLearner, GaussianSmoother, Grid, LearnerConfig, Prediction,
-    PushOutcome, ShapeMatcher, ShapeMatcherConfig,
+    PushOutcome, PushPredictor, ShapeMatcher, ShapeMatcherConfig,
 };
 use agp_physics::{Sim, SimConfig};
 use agp_planner::{Goal, PushChoiceSettings, PushPlan, PushPlanner, approach_start};
@@ -293,13 +293,15 @@ pub struct ReferencePush {
 /// prices a full-length prediction at a push fraction. The first candidate of least cost
 /// wins, as in [`PushPlanner::plan`].
 pub fn reference_plan(
-    ag: &AffordanceGradient,
+    predictor: &PushPredictor<'_>,
     settings: &PushChoiceSettings,
     cost: impl Fn(&Prediction, f64) -> f64,
 ) -> Option<ReferencePush> {
     reference_plan_over(
-        ag,
-        &ag.contact_candidates(settings.contact_count),
+        predictor,
+        &predictor
+            .gradient()
+            .contact_candidates(settings.contact_count),
         settings,
         cost,
     )
@@ -307,12 +309,12 @@ pub fn reference_plan(
 
 /// [`reference_plan`] with the contact candidates given (only the alphas built per call).
 pub fn reference_plan_over(
-    ag: &AffordanceGradient,
+    predictor: &PushPredictor<'_>,
     contacts: &[DVec2],
     settings: &PushChoiceSettings,
     cost: impl Fn(&Prediction, f64) -> f64,
 ) -> Option<ReferencePush> {
-    let learned: Vec<f64> = ag.alphas_deg().collect();
+    let learned: Vec<f64> = predictor.gradient().alphas_deg().collect();
     let lo = learned.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = learned.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !(lo.is_finite() && hi.is_finite()) {
@@ -324,7 +326,7 @@ pub fn reference_plan_over(
     for &c in contacts {
         for k in 0..=n {
             let alpha = (lo + k as f64 * step).min(hi);
-            let Some(p) = ag.predict(c, alpha) else {
+            let Some(p) = predictor.predict(c, alpha) else {
                 continue;
             };
             for &f in &settings.push_fractions {
@@ -348,16 +350,11 @@ pub fn reference_plan_over(
 /// How far apart the costs of the pushes ours and the reference chose are, over `goals`
 /// from `estimate`: the largest `|ours - reference|`, metres (infinite when only one of
 /// the two finds a push).
-pub fn push_cost_disagreement(
-    ag: &AffordanceGradient,
-    planner: &PushPlanner,
-    estimate: Pose2,
-    goals: &[Goal],
-) -> f64 {
+pub fn push_cost_disagreement(planner: &PushPlanner<'_>, estimate: Pose2, goals: &[Goal]) -> f64 {
     let mut worst = 0.0_f64;
     for goal in goals {
-        let ours: Option<PushPlan> = planner.plan(ag, estimate, goal);
-        let theirs = reference_plan(ag, planner.settings(), |p, f| {
+        let ours: Option<PushPlan> = planner.plan(estimate, goal);
+        let theirs = reference_plan(planner.predictor(), planner.settings(), |p, f| {
             planner.score(p, f, estimate, goal).2
         });
         let d = match (ours, theirs) {

@@ -215,7 +215,7 @@ fn main() -> Result<()> {
     let planner = PushPlanner::new(&ag, settings.clone());
     let goals = random_goals(16, 11);
     let estimate = Pose2::new(0.0, 0.0, 0.0);
-    let worst_cost = push_cost_disagreement(&ag, &planner, estimate, &goals);
+    let worst_cost = push_cost_disagreement(&planner, estimate, &goals);
     println!(
         "push search, {} contacts x {} deg alpha steps x {} fractions: max |cost ours - cost reference| = {:.2e} mm over {} goals (tolerance {:.0e} mm)",
         planner.contacts().len(),
@@ -230,12 +230,12 @@ fn main() -> Result<()> {
     let mut k = 0;
     let ours = measure(warmup / 4, push_calls, allocations, || {
         k = (k + 1) % goals.len();
-        black_box(planner.plan(&ag, estimate, black_box(&goals[k])));
+        black_box(planner.plan(estimate, black_box(&goals[k])));
     });
     let reference = measure(ref_warmup, args.ref_calls, allocations, || {
         k = (k + 1) % goals.len();
         let goal = &goals[k];
-        black_box(reference_plan(&ag, &settings, |p, f| {
+        black_box(reference_plan(planner.predictor(), &settings, |p, f| {
             planner.score(p, f, estimate, goal).2
         }));
     });
@@ -243,9 +243,12 @@ fn main() -> Result<()> {
     let reference_given = measure(ref_warmup, args.ref_calls, allocations, || {
         k = (k + 1) % goals.len();
         let goal = &goals[k];
-        black_box(reference_plan_over(&ag, &contacts, &settings, |p, f| {
-            planner.score(p, f, estimate, goal).2
-        }));
+        black_box(reference_plan_over(
+            planner.predictor(),
+            &contacts,
+            &settings,
+            |p, f| planner.score(p, f, estimate, goal).2,
+        ));
     });
     rows.push(Row {
         case: "push search",

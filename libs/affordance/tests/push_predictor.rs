@@ -1,0 +1,145 @@
+//! The push predictor: pushes of the learning protocol's family (start on a circle, heading
+//! at the centroid turned by alpha), interpolated between learned alphas along each start.
+
+use std::f64::consts::{PI, TAU};
+
+use agp_affordance::{
+    AffordanceGradient, AffordanceLearner, LearnerConfig, PushOutcome, PushPredictor,
+    approach_start,
+};
+use glam::DVec2;
+
+/// The round object's radius and the start circle's, metres.
+const R: f64 = 0.04;
+const START: f64 = 0.1;
+
+fn wrap(a: f64) -> f64 {
+    (a + PI).rem_euclid(TAU) - PI
+}
+
+/// Where the push from start angle `phi` at `alpha_deg` first meets the disc: its aim point.
+fn aim(phi: f64, alpha_deg: f64) -> Option<DVec2> {
+    let s = DVec2::from_angle(phi) * START;
+    let d = DVec2::from_angle(phi + PI + alpha_deg.to_radians());
+    let b = s.dot(d);
+    let disc = b * b - (s.length_squared() - R * R);
+    (disc >= 0.0).then(|| s + d * (-b - disc.sqrt()))
+}
+
+/// The analytic "physics" of the synthetic trials: the effect depends on where the push
+/// starts (sharply: three turns of the rotation per lap) and linearly on alpha, as the
+/// probe shows for real pushes from one start.
+fn model(phi: f64, alpha_deg: f64) -> (DVec2, f64) {
+    let displacement = DVec2::from_angle(phi + PI + 0.01 * alpha_deg) * 0.03;
+    let rotation = 0.4 * (3.0 * phi).sin() - 0.03 * alpha_deg;
+    (displacement, rotation)
+}
+
+/// 240 trials per alpha round the circle, keyed by aim point; the disc's border as S.
+fn learned() -> AffordanceGradient {
+    let config = LearnerConfig::default();
+    let mut learner = AffordanceLearner::new("disc", &config).expect("a valid config");
+    for &alpha in &config.alphas_deg {
+        for k in 0..240 {
+            let phi = TAU * k as f64 / 240.0;
+            let (displacement_obj, rotation_rad) = model(phi, alpha);
+            let push = PushOutcome {
+                contact_point_obj: aim(phi, alpha).expect("every start meets the disc"),
+                displacement_obj,
+                rotation_rad,
+            };
+            learner.add_push(alpha, &push).expect("a learned alpha");
+            learner
+                .add_border_point(alpha, DVec2::from_angle(phi) * R)
+                .expect("a learned alpha");
+        }
+    }
+    learner.into_gradient()
+}
+
+#[test]
+fn at_a_learned_alpha_the_predictor_answers_as_the_gradient_does() {
+    let ag = learned();
+    let predictor = PushPredictor::new(&ag, START);
+    for alpha in [0.0, 15.0, -15.0] {
+        for k in 0..24 {
+            let c = DVec2::from_angle(TAU * k as f64 / 24.0) * R;
+            assert_eq!(predictor.predict(c, alpha), ag.predict(c, alpha));
+        }
+    }
+}
+
+#[test]
+fn between_learned_alphas_the_predictor_follows_the_pushes_of_one_start() {
+    // The learned layers smooth the model along the border (push sigma 5 mm, about 7 deg
+    // of the disc): the three-per-lap rotation loses about 1 - exp(-(3 * 0.125)^2 / 2) =
+    // 7 % of its 23 deg amplitude, 1.6 deg, at a learned alpha as between them. The
+    // predictor adds little to that; interpolating at a fixed aim point mixes pushes that
+    // started 20 deg apart, where the rotation differs by up to 24 deg.
+    let ag = learned();
+    let predictor = PushPredictor::new(&ag, START);
+    let (mut ours, mut per_contact) = (Vec::new(), Vec::new());
+    for alpha in [-10.0, -7.5, -2.5, 4.0, 7.5, 11.0] {
+        for k in 0..72 {
+            let phi = TAU * (k as f64 + 0.5) / 72.0;
+            let c = aim(phi, alpha).expect("the disc is in the way");
+            let (_, truth) = model(phi, alpha);
+            let p = predictor.predict(c, alpha).expect("learned all round");
+            let q = ag.predict(c, alpha).expect("learned all round");
+            ours.push(wrap(p.rotation_rad - truth).abs().to_degrees());
+            per_contact.push(wrap(q.rotation_rad - truth).abs().to_degrees());
+        }
+    }
+    let worst = ours.iter().copied().fold(0.0, f64::max);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    eprintln!(
+        "rotation error: along the start mean {:.2} worst {worst:.2} deg; per contact mean {:.2} deg",
+        mean(&ours),
+        mean(&per_contact)
+    );
+    assert!(worst < 2.5, "the predictor is off by up to {worst:.2} deg");
+    assert!(
+        mean(&per_contact) > 2.5 * mean(&ours),
+        "per contact {:.2} deg, along the start {:.2} deg on average",
+        mean(&per_contact),
+        mean(&ours)
+    );
+}
+
+#[test]
+fn a_straight_push_starts_on_the_contacts_own_ray() {
+    let c = DVec2::new(0.03, 0.04);
+    let (s, h) = approach_start(c, 0.0, 0.1).expect("a start");
+    assert!((s - c.normalize() * 0.1).length() < 1e-9, "{s}");
+    assert!(
+        wrap(h - (-c).to_angle()).abs() < 1e-9,
+        "heading {h} is not towards the centroid"
+    );
+}
+
+#[test]
+fn an_alpha_push_starts_where_its_line_meets_the_contact_at_that_alpha() {
+    for alpha in [-15.0_f64, -7.5, 5.0, 15.0] {
+        for c in [
+            DVec2::new(-0.05, 0.0),
+            DVec2::new(0.02, -0.04),
+            DVec2::new(0.0, 0.057),
+        ] {
+            let r = 0.1;
+            let (s, h) = approach_start(c, alpha, r).expect("a start");
+            assert!((s.length() - r).abs() < 1e-9);
+            let u = DVec2::from_angle(h);
+            // The heading line passes through the contact, ahead of the robot...
+            assert!(u.perp_dot(c - s).abs() < 1e-7, "alpha {alpha}, c {c}");
+            assert!(u.dot(c - s) > 0.0);
+            // ...and makes the angle alpha with the direction to the centroid.
+            let dev = wrap(h - (-s).to_angle()).to_degrees();
+            assert!((dev - alpha).abs() < 1e-6, "deviation {dev} vs {alpha}");
+        }
+    }
+}
+
+#[test]
+fn a_contact_outside_the_start_circle_has_no_start() {
+    assert!(approach_start(DVec2::new(0.2, 0.0), 0.0, 0.1).is_none());
+}
