@@ -213,7 +213,7 @@ impl Instance {
             node,
             ServiceNames::GROUND_TRUTH,
             &ServiceNames::event_of(ServiceNames::GROUND_TRUTH),
-            Qos::stream(),
+            Qos::truth(),
         )
     }
 
@@ -365,6 +365,16 @@ impl Qos {
         }
     }
 
+    /// Ground truth: the latest for the oracle, and every step for the judge, which reads
+    /// it in batches (about every millisecond, a hundred steps at full lockstep speed) and
+    /// must not lose the steps it records: 1024 steps of room, 72 KiB per subscriber.
+    fn truth() -> Self {
+        Self {
+            buffer: 1024,
+            ..Self::stream()
+        }
+    }
+
     /// Commands: every one must arrive in order. Room for old and new planner during a swap.
     fn commands() -> Self {
         Self {
@@ -375,14 +385,21 @@ impl Qos {
         }
     }
 
-    /// Gradient grids: a whole affordance set (S, Px, Py, R+, R- for three alphas), kept in
-    /// history so a late or restarted reader gets all of them.
+    /// Gradient grids: a whole set ([`crate::GRIDS_PER_ALPHA`] grids for each of up to
+    /// [`crate::MAX_GRID_ALPHAS`] alphas: 88 grids of 65,624 bytes, 5.8 MB) kept in history,
+    /// so a late or restarted reader gets all of it, and fitting each reader's buffer, so a
+    /// reader that drains only after the publication loses none.
+    ///
+    /// Each publisher preallocates `max_subscribers * (buffer + 2 borrowed) + history + 2
+    /// loaned` samples: 450 grids, about 30 MB of shared memory. Subscribers: the planner,
+    /// a hot-swapped one beside it, and one tool or test.
     fn grids() -> Self {
+        let set = crate::GRIDS_PER_ALPHA * crate::MAX_GRID_ALPHAS;
         Self {
-            history: 15,
-            buffer: 15,
+            history: set,
+            buffer: set,
             max_publishers: 4,
-            max_subscribers: 6,
+            max_subscribers: 4,
         }
     }
 

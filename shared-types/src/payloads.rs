@@ -169,29 +169,75 @@ pub struct ObjectEstimate {
     pub grids_seq: u64,
 }
 
+/// Number of grids the estimator publishes per learned alpha: one of each [`GridKind`].
+pub const GRIDS_PER_ALPHA: usize = 11;
+
+/// Largest number of alphas one published set of gradient grids may hold: the `grids`
+/// topic keeps a whole set of this many alphas in its history and in each reader's buffer.
+/// The AG file allows no more (`agp_affordance::MAX_ALPHAS`, checked at compile time there).
+pub const MAX_GRID_ALPHAS: usize = 8;
+
 /// Which component of an affordance gradient a grid holds.
+///
+/// The first five are the paper's tuple (S, P, R+, R-) as it shows them: S normalised to
+/// [0, 1], P as two grids, R+ and R- as weighted means of the rotations of their sign. The
+/// others are the statistics a reader needs, beside P, to predict as the estimator does
+/// (`agp_affordance::AffordanceGradient::from_grids` rebuilds the gradient from them): the
+/// push weight every weighted mean of a push is taken over, the signed rotation predictions
+/// use, the means of the squares the spreads come from, and the weights of R+ and R-.
+///
+/// A weighted mean is written as 0 where its weight is 1e-6 or less (no push nearby); the
+/// weight times the mean gives back the weighted sum. The numbers are part of the payload
+/// format: the paper's components keep 0 to 4.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum GridKind {
-    /// S: probability that the object's border lies at a cell.
+    /// Paper, S: probability that the object's border lies at a cell (the shape evidence
+    /// divided by [`GridHeader::shape_scale`]).
     Shape = 0,
-    /// P, x component: where the centroid moves (m) when pushed from the cell towards the centre.
+    /// Paper, P, x component: where the centroid moves (m) when pushed from the cell towards
+    /// the centre; weighted mean over [`GridKind::PushWeight`].
     PositionX = 1,
-    /// P, y component.
+    /// Paper, P, y component (m); weighted mean over [`GridKind::PushWeight`].
     PositionY = 2,
-    /// R+: counter-clockwise rotation (rad) of a push from the cell.
+    /// Paper, R+: counter-clockwise rotation (rad) of a push from the cell; weighted mean
+    /// over [`GridKind::RotationPosWeight`].
     RotationPos = 3,
-    /// R-: clockwise rotation (rad, stored negative) of a push from the cell.
+    /// Paper, R-: clockwise rotation (rad, stored negative) of a push from the cell;
+    /// weighted mean over [`GridKind::RotationNegWeight`].
     RotationNeg = 4,
+    /// Statistics: the weight of every push at the cell (a sum of unit-peak Gaussians,
+    /// about the number of pushes within one sigma).
+    PushWeight = 5,
+    /// Statistics: signed rotation (rad, counter-clockwise positive) of every push, weighted
+    /// mean over [`GridKind::PushWeight`]: what a prediction's rotation is.
+    Rotation = 6,
+    /// Statistics: squared displacement length (m^2), weighted mean over
+    /// [`GridKind::PushWeight`]: the displacement spread.
+    DisplacementSqMean = 7,
+    /// Statistics: squared rotation (rad^2), weighted mean over [`GridKind::PushWeight`]:
+    /// the rotation spread.
+    RotationSqMean = 8,
+    /// Statistics: the weight of the counter-clockwise pushes (R+'s weight).
+    RotationPosWeight = 9,
+    /// Statistics: the weight of the clockwise pushes (R-'s weight).
+    RotationNegWeight = 10,
 }
 
 impl GridKind {
-    pub const ALL: [GridKind; 5] = [
+    /// Every kind, in publication order: the paper's five first.
+    pub const ALL: [GridKind; GRIDS_PER_ALPHA] = [
         GridKind::Shape,
         GridKind::PositionX,
         GridKind::PositionY,
         GridKind::RotationPos,
         GridKind::RotationNeg,
+        GridKind::PushWeight,
+        GridKind::Rotation,
+        GridKind::DisplacementSqMean,
+        GridKind::RotationSqMean,
+        GridKind::RotationPosWeight,
+        GridKind::RotationNegWeight,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -199,34 +245,46 @@ impl GridKind {
     }
 }
 
-/// Header of a gradient grid: what it holds and where its cells are.
+/// Header of a gradient grid: what it holds, where its cells are, and what a reader needs
+/// of its alpha's layer to rebuild the gradient (the same in every grid of one alpha).
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::GridHeader.v1")]
+#[type_name("agp::GridHeader.v2")]
 pub struct GridHeader {
     /// Bumped each time the estimator publishes a new set of grids.
     pub seq: u64,
     /// A [`GridKind`] as u32.
     pub kind: u32,
-    /// The push direction's deviation from the centroid, degrees (0, +15, -15).
-    pub alpha_deg: f32,
-    /// Side of a cell, metres.
-    pub cell_size_m: f32,
+    /// Number of alphas of the set this grid belongs to (1 ..= [`MAX_GRID_ALPHAS`]): a
+    /// whole set is `alpha_count * GRIDS_PER_ALPHA` grids. 0 for a lone grid of no set.
+    pub alpha_count: u32,
     /// Number of cells along x and y (both [`GRID_SIDE`]).
     pub width: u32,
     pub height: u32,
-    pub _pad: u32,
+    /// The push direction's deviation from the centroid, degrees (0, +15, -15).
+    pub alpha_deg: f64,
+    /// Side of a cell, metres.
+    pub cell_size_m: f64,
     /// Object-frame coordinates (metres) of the corner of cell (0, 0): cell (i, j) covers
     /// `origin + (i, j) * cell_size` to `origin + (i + 1, j + 1) * cell_size`.
     pub origin_x_m: f64,
     pub origin_y_m: f64,
+    /// The largest cell of the alpha's shape evidence (a sum of unit-peak Gaussians at
+    /// border points), which [`GridKind::Shape`] was divided by; 0 when S is all zeros.
+    pub shape_scale: f64,
+    /// Largest |rotation| of a single push learned at this alpha, rad.
+    pub max_rotation_rad: f64,
+    /// Pushes learned at this alpha.
+    pub pushes: u64,
+    /// Border points learned at this alpha.
+    pub border_points: u64,
 }
 
 /// One 128 x 128 f32 gradient grid, row-major (`cells[j * width + i]`, j along y), written
 /// once into the loaned sample and read in place.
 #[derive(Debug, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::GradientGrid.v1")]
+#[type_name("agp::GradientGrid.v2")]
 pub struct GradientGrid {
     pub header: GridHeader,
     pub cells: [f32; GRID_CELLS],
@@ -268,8 +326,8 @@ const _: () = {
     assert!(size_of::<Reset>() == 64 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
     assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8);
-    assert!(size_of::<GridHeader>() == 48 && align_of::<GridHeader>() == 8);
-    assert!(size_of::<GradientGrid>() == 48 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
+    assert!(size_of::<GridHeader>() == 8 + 4 * 4 + 8 * 8 && align_of::<GridHeader>() == 8);
+    assert!(size_of::<GradientGrid>() == 88 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
     assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
 };
 

@@ -1,8 +1,10 @@
 //! The learning phase over the real pipeline: physics, `agp-estimator` and `agp-planner
 //! --mode learn` under `agp up`, a few trials on the triangle. The run ends with status 0,
-//! the estimator publishes the 15 grids of the affordance gradient (S, Px, Py, R+, R- for
-//! alphas 0, +15, -15) on the `grids` topic and saves the AG file, which loads again
-//! (`agp-estimator --load` publishes the same grids), and the instance leaves no file.
+//! the estimator publishes the 33 grids of the affordance gradient (for each of alphas 0,
+//! +15, -15 the paper's S, Px, Py, R+, R- and the six statistics a planner rebuilds the
+//! gradient from, every header carrying its set and its alpha's counters) on the `grids`
+//! topic and saves the AG file, which loads again (`agp-estimator --load` publishes the same
+//! grids), and the instance leaves no file.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -11,7 +13,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{GRID_SIDE, GridKind, Instance};
+use agp_shared_types::{GRID_CELLS, GRID_SIDE, GRIDS_PER_ALPHA, GridKind, Instance};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files};
 use agp_world::{ObjectShape, Scenario};
 
@@ -23,6 +25,12 @@ const CELL_SIZE_M: f64 = 0.002;
 
 /// Trials per alpha: few, so the test stays short.
 const TRIALS_PER_ALPHA: u32 = 6;
+
+/// The learned alphas, whole degrees.
+const ALPHAS_DEG: [i32; 3] = [-15, 0, 15];
+
+/// Grids of one publication: every kind of every alpha.
+const SET_GRIDS: usize = GRIDS_PER_ALPHA * ALPHAS_DEG.len();
 
 fn launch(instance: &str) -> String {
     format!(
@@ -39,13 +47,19 @@ fn launch(instance: &str) -> String {
 #[derive(Debug, Clone, PartialEq)]
 struct GridSeen {
     seq: u64,
-    cell_size_m: f32,
+    alpha_count: u32,
+    cell_size_m: f64,
     width: u32,
     height: u32,
     origin_m: (f64, f64),
+    /// The alpha's layer as the header tells it: S's scale, largest rotation (rad), pushes
+    /// and border points.
+    layer: (f64, f64, u64, u64),
     /// Sum and number of non-zero cells: a fingerprint to compare two publications.
     sum: f64,
     nonzero: usize,
+    /// The cells, to check the kinds of one alpha against each other.
+    cells: Vec<f32>,
     /// Shape grids only: fraction of S's mass within `BORDER_BAND_M` of the true border,
     /// and its mass-weighted mean distance to the border, m.
     near_border: f64,
@@ -114,7 +128,7 @@ fn collect_grids(
                 sum += v;
                 nonzero += 1;
                 if h.kind == GridKind::Shape as u32 {
-                    let c = f64::from(h.cell_size_m);
+                    let c = h.cell_size_m;
                     let x = h.origin_x_m + (i as f64 + 0.5) * c;
                     let y = h.origin_y_m + (j as f64 + 0.5) * c;
                     let d = (0..n)
@@ -132,12 +146,15 @@ fn collect_grids(
             key,
             GridSeen {
                 seq: h.seq,
+                alpha_count: h.alpha_count,
                 cell_size_m: h.cell_size_m,
                 width: h.width,
                 height: h.height,
                 origin_m: (h.origin_x_m, h.origin_y_m),
+                layer: (h.shape_scale, h.max_rotation_rad, h.pushes, h.border_points),
                 sum,
                 nonzero,
+                cells: g.cells.to_vec(),
                 near_border: if sum > 0.0 { near / sum } else { 0.0 },
                 mean_distance_m: if sum > 0.0 { weighted / sum } else { 0.0 },
             },
@@ -146,19 +163,25 @@ fn collect_grids(
     seen
 }
 
-/// Checks the 15 grids of a learned triangle.
+/// Checks the 33 grids of a learned triangle.
 #[track_caller]
 fn check_grids(grids: &BTreeMap<(u32, i32), GridSeen>) {
-    assert_eq!(grids.len(), 15, "5 kinds x 3 alphas: {:?}", grids.keys());
+    assert_eq!(
+        grids.len(),
+        SET_GRIDS,
+        "{GRIDS_PER_ALPHA} kinds x 3 alphas: {:?}",
+        grids.keys()
+    );
     let seq = grids.values().next().expect("a grid").seq;
     for kind in GridKind::ALL {
-        for alpha in [-15, 0, 15] {
+        for alpha in ALPHAS_DEG {
             let g = grids
                 .get(&(kind as u32, alpha))
                 .unwrap_or_else(|| panic!("no {kind:?} grid at alpha {alpha}"));
             assert_eq!(g.seq, seq, "one publication");
+            assert_eq!(g.alpha_count, 3, "a set of three alphas");
             assert_eq!((g.width, g.height), (GRID_SIDE as u32, GRID_SIDE as u32));
-            assert!((f64::from(g.cell_size_m) - CELL_SIZE_M).abs() < 1e-9);
+            assert!((g.cell_size_m - CELL_SIZE_M).abs() < 1e-12);
             // Centred on the centroid: the origin is half the grid's side down and left.
             let half = -CELL_SIZE_M * GRID_SIDE as f64 / 2.0;
             assert!(
@@ -168,11 +191,18 @@ fn check_grids(grids: &BTreeMap<(u32, i32), GridSeen>) {
             );
         }
     }
-    for alpha in [-15, 0, 15] {
+    for alpha in ALPHAS_DEG {
         let nonzero = |kind: GridKind| grids[&(kind as u32, alpha)].nonzero;
-        for kind in [GridKind::Shape, GridKind::PositionX, GridKind::PositionY] {
+        for kind in [
+            GridKind::Shape,
+            GridKind::PositionX,
+            GridKind::PositionY,
+            GridKind::PushWeight,
+            GridKind::DisplacementSqMean,
+        ] {
             assert!(nonzero(kind) > 0, "{kind:?} at alpha {alpha} is empty");
         }
+        check_layer(grids, alpha);
         // A few pushes may all turn the object one way: one of R+ and R- may be empty.
         assert!(
             nonzero(GridKind::RotationPos) + nonzero(GridKind::RotationNeg) > 0,
@@ -201,6 +231,91 @@ fn check_grids(grids: &BTreeMap<(u32, i32), GridSeen>) {
     }
 }
 
+/// The grids of one alpha against each other and against their headers: one layer (the
+/// same S scale and counters in every header, no more pushes than trials, S normalised by
+/// its scale), and statistics a planner can predict from (every push weighs in R+'s or R-'s
+/// weight, no mean rotation beyond the largest one, no negative variance).
+#[track_caller]
+fn check_layer(grids: &BTreeMap<(u32, i32), GridSeen>, alpha: i32) {
+    let grid = |kind: GridKind| &grids[&(kind as u32, alpha)];
+    let layer = grid(GridKind::Shape).layer;
+    for kind in GridKind::ALL {
+        assert_eq!(
+            grid(kind).layer,
+            layer,
+            "{kind:?} at alpha {alpha}: another layer"
+        );
+    }
+    let (shape_scale, max_rotation_rad, pushes, border_points) = layer;
+    println!(
+        "alpha {alpha}: {pushes} pushes, {border_points} border points, S scale {shape_scale:.1}, largest rotation {:.1} deg",
+        max_rotation_rad.to_degrees()
+    );
+    assert!(
+        (1..=u64::from(TRIALS_PER_ALPHA)).contains(&pushes),
+        "alpha {alpha}: {pushes} pushes of {TRIALS_PER_ALPHA} trials"
+    );
+    assert!(border_points > 0 && shape_scale > 0.0);
+    assert!(max_rotation_rad > 0.0 && max_rotation_rad < std::f64::consts::PI);
+    let s_max = grid(GridKind::Shape)
+        .cells
+        .iter()
+        .copied()
+        .fold(0.0, f32::max);
+    assert!(
+        (s_max - 1.0).abs() < 1e-6,
+        "S at alpha {alpha} peaks at {s_max}"
+    );
+
+    let cells = |kind: GridKind| &grid(kind).cells;
+    let (w, wp, wn) = (
+        cells(GridKind::PushWeight),
+        cells(GridKind::RotationPosWeight),
+        cells(GridKind::RotationNegWeight),
+    );
+    let (px, py, d2) = (
+        cells(GridKind::PositionX),
+        cells(GridKind::PositionY),
+        cells(GridKind::DisplacementSqMean),
+    );
+    let (r, r2, rp, rn) = (
+        cells(GridKind::Rotation),
+        cells(GridKind::RotationSqMean),
+        cells(GridKind::RotationPos),
+        cells(GridKind::RotationNeg),
+    );
+    // f32 rounding of sums of a few unit-peak Gaussians and of their ratios.
+    let tol = |x: f32| 1e-5 * x.abs() + 1e-7;
+    let max_rot = max_rotation_rad as f32;
+    for k in 0..GRID_CELLS {
+        assert!(w[k] >= 0.0 && wp[k] >= 0.0 && wn[k] >= 0.0);
+        assert!(
+            (w[k] - wp[k] - wn[k]).abs() <= tol(w[k]),
+            "alpha {alpha} cell {k}: push weight {} is not R+'s {} plus R-'s {}",
+            w[k],
+            wp[k],
+            wn[k]
+        );
+        assert!(rp[k] >= 0.0 && rp[k] <= max_rot + tol(max_rot));
+        assert!(rn[k] <= 0.0 && -rn[k] <= max_rot + tol(max_rot));
+        assert!(r[k].abs() <= max_rot + tol(max_rot));
+        if w[k] > 0.05 {
+            let d2_mean = px[k] * px[k] + py[k] * py[k];
+            assert!(
+                d2[k] >= d2_mean - tol(d2[k]),
+                "alpha {alpha} cell {k}: mean squared displacement {} below the squared mean {d2_mean}",
+                d2[k]
+            );
+            assert!(
+                r2[k] >= r[k] * r[k] - tol(r2[k]),
+                "alpha {alpha} cell {k}: mean squared rotation {} below the squared mean {}",
+                r2[k],
+                r[k] * r[k]
+            );
+        }
+    }
+}
+
 /// `agp-estimator --load FILE` on a fresh instance: the grids it publishes.
 fn load_grids(instance: &str, file: &Path) -> BTreeMap<(u32, i32), GridSeen> {
     let stop = Arc::new(AtomicBool::new(false));
@@ -208,7 +323,7 @@ fn load_grids(instance: &str, file: &Path) -> BTreeMap<(u32, i32), GridSeen> {
     let name = instance.to_owned();
     let reader = {
         let stop = stop.clone();
-        std::thread::spawn(move || collect_grids(&name, 15, stop, tx))
+        std::thread::spawn(move || collect_grids(&name, SET_GRIDS, stop, tx))
     };
     rx.recv_timeout(TIMEOUT).expect("the reader subscribed");
     let mut estimator = Command::new(bin_path("agp-estimator"))
@@ -237,7 +352,7 @@ fn the_learning_phase_over_three_processes_publishes_and_saves_the_triangles_gra
     let (tx, rx) = std::sync::mpsc::channel();
     let reader = {
         let stop = stop.clone();
-        std::thread::spawn(move || collect_grids(name, 15, stop, tx))
+        std::thread::spawn(move || collect_grids(name, SET_GRIDS, stop, tx))
     };
     rx.recv_timeout(TIMEOUT).expect("the reader subscribed");
     let run = up.wait(TIMEOUT);
@@ -262,6 +377,7 @@ fn the_learning_phase_over_three_processes_publishes_and_saves_the_triangles_gra
     for (key, g) in &live {
         let l = &loaded[key];
         assert_eq!((l.nonzero, l.sum), (g.nonzero, g.sum), "grid {key:?}");
+        assert_eq!(l.layer, g.layer, "grid {key:?}");
     }
     let instance = Instance::new(load_name).expect("a valid name");
     instance

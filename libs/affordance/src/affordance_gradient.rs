@@ -1,4 +1,4 @@
-use agp_shared_types::{GradientGrid, GridKind, Pose2};
+use agp_shared_types::{GradientGrid, GridHeader, GridKind, Pose2};
 use glam::DVec2;
 
 use crate::Grid;
@@ -14,7 +14,7 @@ pub const CONTACT_BORDER_THRESHOLD: f32 = 0.3;
 /// Two alphas closer than this (degrees) are the same alpha.
 pub(crate) const ALPHA_EPS_DEG: f64 = 1e-6;
 
-/// A cell whose weight is below this has no mean (its mean is written as 0).
+/// A cell whose weight is not above this has no mean (its mean is written as 0).
 const MIN_CELL_WEIGHT: f32 = 1e-6;
 
 /// An alpha that is not one of the alphas an affordance gradient was learned for.
@@ -56,6 +56,49 @@ pub(crate) enum LayerGrid {
 
 /// Number of grids in a layer.
 pub(crate) const LAYER_GRIDS: usize = 11;
+
+// One published grid per layer grid: a layer is rebuilt from the grids of its alpha.
+const _: () = assert!(LAYER_GRIDS == agp_shared_types::GRIDS_PER_ALPHA);
+
+/// How a published grid of a [`GridKind`] holds a layer grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum GridEncoding {
+    /// Divided by its largest cell (the layer's shape scale).
+    Normalised,
+    /// As it is (a weight).
+    Plain,
+    /// A weighted sum divided by this weight: a weighted mean, 0 where the weight is not
+    /// above [`MIN_CELL_WEIGHT`].
+    MeanOver(LayerGrid),
+}
+
+/// The layer grid a published grid of `kind` holds, and how: the one table the writer
+/// ([`AffordanceGradient::write_component`]) and the reader
+/// ([`AffordanceGradient::from_grids`]) share.
+pub(crate) fn grid_encoding(kind: GridKind) -> (LayerGrid, GridEncoding) {
+    use GridEncoding::{MeanOver, Normalised, Plain};
+    match kind {
+        GridKind::Shape => (LayerGrid::ShapeEvidence, Normalised),
+        GridKind::PositionX => (LayerGrid::DisplacementX, MeanOver(LayerGrid::PushWeight)),
+        GridKind::PositionY => (LayerGrid::DisplacementY, MeanOver(LayerGrid::PushWeight)),
+        GridKind::RotationPos => (
+            LayerGrid::RotationPos,
+            MeanOver(LayerGrid::RotationPosWeight),
+        ),
+        GridKind::RotationNeg => (
+            LayerGrid::RotationNeg,
+            MeanOver(LayerGrid::RotationNegWeight),
+        ),
+        GridKind::PushWeight => (LayerGrid::PushWeight, Plain),
+        GridKind::Rotation => (LayerGrid::Rotation, MeanOver(LayerGrid::PushWeight)),
+        GridKind::DisplacementSqMean => {
+            (LayerGrid::DisplacementSq, MeanOver(LayerGrid::PushWeight))
+        }
+        GridKind::RotationSqMean => (LayerGrid::RotationSq, MeanOver(LayerGrid::PushWeight)),
+        GridKind::RotationPosWeight => (LayerGrid::RotationPosWeight, Plain),
+        GridKind::RotationNegWeight => (LayerGrid::RotationNegWeight, Plain),
+    }
+}
 
 /// What one alpha's pushes taught.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,31 +147,37 @@ impl AlphaLayer {
         })
     }
 
-    /// Writes the cells of component `kind` (normalised S or a weighted mean) into `out`.
+    /// Writes the cells of component `kind` (normalised S, a weight or a weighted mean, see
+    /// [`grid_encoding`]) into `out`.
     fn write_cells(&self, kind: GridKind, out: &mut [f32]) {
-        let mean = |sum: LayerGrid, weight: LayerGrid, out: &mut [f32]| {
-            let (s, w) = (self.grid(sum).cells(), self.grid(weight).cells());
-            for ((o, &s), &w) in out.iter_mut().zip(s).zip(w) {
-                *o = if w > MIN_CELL_WEIGHT { s / w } else { 0.0 };
-            }
-        };
-        match kind {
-            GridKind::Shape => normalised_into(self.grid(LayerGrid::ShapeEvidence).cells(), out),
-            GridKind::PositionX => mean(LayerGrid::DisplacementX, LayerGrid::PushWeight, out),
-            GridKind::PositionY => mean(LayerGrid::DisplacementY, LayerGrid::PushWeight, out),
-            GridKind::RotationPos => {
-                mean(LayerGrid::RotationPos, LayerGrid::RotationPosWeight, out)
-            }
-            GridKind::RotationNeg => {
-                mean(LayerGrid::RotationNeg, LayerGrid::RotationNegWeight, out)
+        let (grid, encoding) = grid_encoding(kind);
+        let cells = self.grid(grid).cells();
+        match encoding {
+            GridEncoding::Normalised => normalised_into(cells, out),
+            GridEncoding::Plain => out.copy_from_slice(cells),
+            GridEncoding::MeanOver(weight) => {
+                let w = self.grid(weight).cells();
+                for ((o, &s), &w) in out.iter_mut().zip(cells).zip(w) {
+                    *o = if w > MIN_CELL_WEIGHT { s / w } else { 0.0 };
+                }
             }
         }
     }
+
+    /// What the shape evidence is divided by in [`GridKind::Shape`]: its largest cell.
+    pub(crate) fn shape_scale(&self) -> f32 {
+        max_cell(self.grid(LayerGrid::ShapeEvidence).cells())
+    }
+}
+
+/// The largest cell, at least 0 (NaN cells are ignored).
+fn max_cell(cells: &[f32]) -> f32 {
+    cells.iter().copied().fold(0.0_f32, f32::max)
 }
 
 /// `out = cells / max(cells)` (all zeros when the max is not positive).
 fn normalised_into(cells: &[f32], out: &mut [f32]) {
-    let max = cells.iter().copied().fold(0.0_f32, f32::max);
+    let max = max_cell(cells);
     if max > 0.0 {
         let inv = 1.0 / max;
         out.iter_mut().zip(cells).for_each(|(o, &c)| *o = c * inv);
@@ -187,12 +236,12 @@ impl Prediction {
 /// its sign and shows the two. Here they are kept for that display
 /// ([`GridKind::RotationPos`], [`GridKind::RotationNeg`]: each a weighted mean of the
 /// rotations of its sign only), but predictions use a third grid: the weighted mean of the
-/// *signed* rotations of all pushes near the contact. Where both signs occur (near a
-/// corner, where a push turns the object one way or the other depending on which side of
-/// the corner it lands) the signed mean passes continuously through zero as the contact
-/// moves across the corner, as the physics does, instead of jumping between two
-/// magnitudes; how much the pushes there disagree is reported as
-/// [`Prediction::rotation_spread_rad`].
+/// *signed* rotations of all pushes near the contact (published as [`GridKind::Rotation`]).
+/// Where both signs occur (near a corner, where a push turns the object one way or the
+/// other depending on which side of the corner it lands) the signed mean passes
+/// continuously through zero as the contact moves across the corner, as the physics does,
+/// instead of jumping between two magnitudes; how much the pushes there disagree is
+/// reported as [`Prediction::rotation_spread_rad`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct AffordanceGradient {
     pub(crate) object_name: String,
@@ -321,8 +370,13 @@ impl AffordanceGradient {
     }
 
     /// Writes component `kind` of alpha `alpha_deg` straight into `out` (typically a loaned
-    /// shared-memory sample): S normalised to [0, 1], P and R+ / R- as weighted means (0
-    /// where no push was learned). No intermediate grid.
+    /// shared-memory sample): S normalised to [0, 1], P, R+ / R- and the statistics as
+    /// weighted means (0 where no push was learned), the weights as they are (see
+    /// [`GridKind`]). No intermediate grid.
+    ///
+    /// The header describes the grid and its place in the set of sequence number `seq`
+    /// (every kind of every alpha: [`AffordanceGradient::from_grids`] rebuilds the gradient
+    /// from it): the number of alphas, S's scale and the alpha's counters.
     pub fn write_component(
         &self,
         alpha_deg: f64,
@@ -332,7 +386,14 @@ impl AffordanceGradient {
     ) -> Result<(), UnknownAlphaError> {
         let layer = self.layer(alpha_deg)?;
         let g = layer.grid(LayerGrid::ShapeEvidence);
-        out.header = g.header(kind, layer.alpha_deg, seq);
+        out.header = GridHeader {
+            alpha_count: self.layers.len() as u32,
+            shape_scale: f64::from(layer.shape_scale()),
+            max_rotation_rad: layer.max_rotation_rad,
+            pushes: layer.pushes,
+            border_points: layer.border_points,
+            ..g.header(kind, layer.alpha_deg, seq)
+        };
         layer.write_cells(kind, &mut out.cells);
         Ok(())
     }

@@ -1,7 +1,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use agp_shared_types::{GRID_CELLS, GRID_SIDE};
+use agp_shared_types::{GRID_CELLS, GRID_SIDE, MAX_GRID_ALPHAS};
 
 use crate::affordance_gradient::{AlphaLayer, LAYER_GRIDS};
 use crate::{AffordanceGradient, Grid};
@@ -10,10 +10,16 @@ use crate::{AffordanceGradient, Grid};
 pub const AG_FILE_MAGIC: [u8; 6] = *b"AGPAG\0";
 /// The format version this code writes and reads.
 pub const AG_FILE_VERSION: u32 = 1;
-/// Largest number of alphas a file may hold.
-pub const MAX_ALPHAS: u32 = 64;
+/// Largest number of alphas a file may hold: no more than one set of published grids holds
+/// ([`MAX_GRID_ALPHAS`]), so a loaded gradient can always be published whole.
+pub const MAX_ALPHAS: u32 = 8;
 /// Longest object name a file may hold, bytes.
 pub const MAX_NAME_LEN: u32 = 4096;
+
+const _: () = assert!(
+    MAX_ALPHAS as usize <= MAX_GRID_ALPHAS,
+    "the grids topic must hold a whole set of the gradient of any AG file"
+);
 
 const GRID_BYTES: usize = GRID_CELLS * 4;
 const LAYER_TAIL_BYTES: usize = 8 * 3;

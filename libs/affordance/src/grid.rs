@@ -33,7 +33,7 @@ pub enum GridPayloadReadError {
     UnknownKind(u32),
     /// The cell size is not a finite positive number.
     #[error("grid payload has cell size {0} m, expected a finite positive number")]
-    BadCellSize(f32),
+    BadCellSize(f64),
     /// The origin is not finite.
     #[error("grid payload has a non-finite origin ({0}, {1}) m")]
     BadOrigin(f64, f64),
@@ -74,8 +74,7 @@ impl Grid {
     /// Panics if `cell_size_m` is not finite and positive.
     #[track_caller]
     pub fn centred(cell_size_m: f64) -> Self {
-        let half = GRID_SIDE as f64 * cell_size_m / 2.0;
-        Self::with_origin(cell_size_m, DVec2::splat(-half))
+        Self::with_origin(cell_size_m, centred_origin(cell_size_m))
     }
 
     /// A zero grid of `cell_size_m` cells whose cell (0, 0) has its corner at `origin_m`.
@@ -281,52 +280,64 @@ impl Grid {
 
     /// Writes the header (`kind`, `alpha_deg`, `seq`, this grid's geometry) and the cells
     /// straight into `out`, typically a loaned shared-memory sample: no intermediate copy.
+    /// A lone grid belongs to no set: `alpha_count` and the layer's fields are 0.
     pub fn write_into(&self, kind: GridKind, alpha_deg: f64, seq: u64, out: &mut GradientGrid) {
         out.header = self.header(kind, alpha_deg, seq);
         out.cells.copy_from_slice(&self.cells);
     }
 
-    /// The payload header describing this grid.
+    /// The payload header describing this grid, its set and layer fields 0.
     pub(crate) fn header(&self, kind: GridKind, alpha_deg: f64, seq: u64) -> GridHeader {
         GridHeader {
             seq,
             kind: kind as u32,
-            alpha_deg: alpha_deg as f32,
-            cell_size_m: self.cell_size_m as f32,
+            alpha_count: 0,
             width: GRID_SIDE as u32,
             height: GRID_SIDE as u32,
-            _pad: 0,
+            alpha_deg,
+            cell_size_m: self.cell_size_m,
             origin_x_m: self.origin_m.x,
             origin_y_m: self.origin_m.y,
+            shape_scale: 0.0,
+            max_rotation_rad: 0.0,
+            pushes: 0,
+            border_points: 0,
         }
     }
 
     /// A grid read from a payload, after checking its header (size, kind, geometry).
-    ///
-    /// The cell size travels as f32 in the header, so it comes back rounded to f32.
     pub fn from_payload(payload: &GradientGrid) -> Result<Grid, GridPayloadReadError> {
         let h = &payload.header;
-        if h.width as usize != GRID_SIDE || h.height as usize != GRID_SIDE {
-            return Err(GridPayloadReadError::WrongSize {
-                width: h.width,
-                height: h.height,
-            });
-        }
-        if GridKind::from_u32(h.kind).is_none() {
-            return Err(GridPayloadReadError::UnknownKind(h.kind));
-        }
-        if !(h.cell_size_m.is_finite() && h.cell_size_m > 0.0) {
-            return Err(GridPayloadReadError::BadCellSize(h.cell_size_m));
-        }
-        if !(h.origin_x_m.is_finite() && h.origin_y_m.is_finite()) {
-            return Err(GridPayloadReadError::BadOrigin(h.origin_x_m, h.origin_y_m));
-        }
+        check_header(h)?;
         Ok(Grid {
             cells: payload.cells.to_vec(),
-            cell_size_m: f64::from(h.cell_size_m),
+            cell_size_m: h.cell_size_m,
             origin_m: DVec2::new(h.origin_x_m, h.origin_y_m),
         })
     }
+}
+
+/// The origin of a grid of `cell_size_m` cells centred on the object frame's origin.
+pub(crate) fn centred_origin(cell_size_m: f64) -> DVec2 {
+    DVec2::splat(-(GRID_SIDE as f64 * cell_size_m / 2.0))
+}
+
+/// Checks what every grid payload must satisfy (size, kind, geometry); returns its kind.
+pub(crate) fn check_header(h: &GridHeader) -> Result<GridKind, GridPayloadReadError> {
+    if h.width as usize != GRID_SIDE || h.height as usize != GRID_SIDE {
+        return Err(GridPayloadReadError::WrongSize {
+            width: h.width,
+            height: h.height,
+        });
+    }
+    let kind = GridKind::from_u32(h.kind).ok_or(GridPayloadReadError::UnknownKind(h.kind))?;
+    if !(h.cell_size_m.is_finite() && h.cell_size_m > 0.0) {
+        return Err(GridPayloadReadError::BadCellSize(h.cell_size_m));
+    }
+    if !(h.origin_x_m.is_finite() && h.origin_y_m.is_finite()) {
+        return Err(GridPayloadReadError::BadOrigin(h.origin_x_m, h.origin_y_m));
+    }
+    Ok(kind)
 }
 
 /// Calls `f(index, g)` for every cell (of a grid of `cell_size_m` cells with corner

@@ -1,4 +1,4 @@
-//! Affordance gradients as math: grids, Gaussian smoothing, learning and prediction (per contact, and along the protocol's pushes), shape matching (Algorithm 3) and the AG file; no IPC, no physics.
+//! Affordance gradients as math: grids, Gaussian smoothing, learning and prediction (per contact, and along the protocol's pushes), shape matching (Algorithm 3), the AG file and the rebuild from published grids; no IPC, no physics.
 
 #![warn(missing_docs)]
 
@@ -7,6 +7,7 @@ mod affordance_learner;
 mod ag_file;
 mod gaussian_smoother;
 mod grid;
+mod grid_set_assembler;
 mod push_predictor;
 mod shape_matcher;
 
@@ -22,6 +23,7 @@ pub use ag_file::{
 };
 pub use gaussian_smoother::{GaussianSmoother, SmoothingMethod};
 pub use grid::{DEFAULT_CELL_SIZE_M, Grid, GridPayloadReadError};
+pub use grid_set_assembler::{GradientFromGridsError, GridSetAssembler};
 pub use push_predictor::{PushPredictor, approach_start, border_crossing};
 pub use shape_matcher::{
     MIN_MATCH_POINTS, MatchMethod, MatchedPose, ShapeMatch, ShapeMatchError, ShapeMatcher,

@@ -118,10 +118,12 @@ fn a_payload_of_another_size_kind_or_geometry_is_refused() {
         Err(GridPayloadReadError::WrongSize { width: 64, .. })
     ));
     g.write_into(GridKind::Shape, 0.0, 1, &mut payload);
-    payload.header.kind = 9;
+    // The first number past the kinds.
+    let unknown = GridKind::ALL.len() as u32;
+    payload.header.kind = unknown;
     assert_eq!(
         Grid::from_payload(&payload),
-        Err(GridPayloadReadError::UnknownKind(9))
+        Err(GridPayloadReadError::UnknownKind(unknown))
     );
     g.write_into(GridKind::Shape, 0.0, 1, &mut payload);
     payload.header.cell_size_m = 0.0;

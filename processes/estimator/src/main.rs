@@ -4,7 +4,8 @@
 //! [`LearnEvent`]s, feeds an [`agp_estimator::LearningSession`], reports each trial on the
 //! learn reports topic and acknowledges every frame with an [`ObjectEstimate`] of the same
 //! publish stamp (the planner in `learn` mode waits for it, so no frame is lost). When the
-//! planner says learning is done it writes every grid (S, Px, Py, R+, R- per alpha) straight
+//! planner says learning is done it writes every grid (per alpha the paper's S, Px, Py, R+,
+//! R- and the statistics a planner rebuilds the gradient from: every [`GridKind`]) straight
 //! into loaned shared-memory samples, sends the `Learned` report and saves the AG file to
 //! `$AGP_RESULTS/<object>.ag`. With `--load FILE` it publishes the grids of a saved file at
 //! once instead of learning (a restarted estimator gets its gradients back).
@@ -19,8 +20,8 @@ use agp_affordance::AffordanceGradient;
 use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
 use agp_shared_types::{
     GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
-    LearnReportKind, ObjectEstimate, WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler,
-    monotonic_ns, stage,
+    LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy, Waiter,
+    install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
@@ -48,8 +49,13 @@ struct Args {
     #[arg(long, env = "AGP_RESULTS", default_value = "results")]
     results: PathBuf,
     /// Publish the gradients of this AG file at once instead of learning.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "reuse")]
     load: Option<PathBuf>,
+    /// Publish the gradients saved in `<results>/<object>.ag` when that file exists, and
+    /// learn (and save it) otherwise: what a run that learns once and then reuses wants. A
+    /// restarted estimator gets its gradients back from the file.
+    #[arg(long)]
+    reuse: bool,
     /// Exit with an error when neither a frame nor an event arrives for this long,
     /// seconds; 0 waits until SIGTERM.
     #[arg(long, default_value_t = 0)]
@@ -73,8 +79,22 @@ fn run() -> Result<()> {
     let scenario = Scenario::resolve(&args.scenario)?;
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
-    let mut estimator = Estimator::open(&instance, &scenario, &args)?;
-    if let Some(path) = &args.load {
+    let saved = args.results.join(format!("{}.ag", scenario.name));
+    let load = match (&args.load, args.reuse) {
+        (Some(path), _) => Some(path.clone()),
+        (None, true) if saved.is_file() => Some(saved),
+        (None, true) => {
+            println!(
+                "agp-estimator: no AG file at {}: learning `{}` from the planner's trials",
+                saved.display(),
+                scenario.name
+            );
+            None
+        }
+        (None, false) => None,
+    };
+    let mut estimator = Estimator::open(&instance, &scenario, load.is_some(), &args)?;
+    if let Some(path) = &load {
         let gradient = AffordanceGradient::load(path)
             .with_context(|| format!("cannot load the AG file {}", path.display()))?;
         estimator.publish(&gradient)?;
@@ -167,7 +187,7 @@ fn view(e: &LearnEvent) -> IrView {
 }
 
 impl Estimator {
-    fn open(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<Self> {
+    fn open(instance: &Instance, scenario: &Scenario, loading: bool, args: &Args) -> Result<Self> {
         let node = instance
             .node("estimator", false)
             .map_err(open_err("the estimator node"))?;
@@ -184,7 +204,7 @@ impl Estimator {
             .learn_reports(&node)
             .map_err(open_err("the learn reports"))?;
         let grids = instance.grids(&node).map_err(open_err("the grids"))?;
-        let session = if args.load.is_some() {
+        let session = if loading {
             None
         } else {
             Some(session(scenario)?)
@@ -273,9 +293,15 @@ impl Estimator {
             .map_err(|e| anyhow!("cannot update the grid connections: {e:?}"))
     }
 
-    /// Publishes every grid of `gradient` (S, Px, Py, R+, R- per alpha), each written once
-    /// straight into its loaned sample.
+    /// Publishes every grid of `gradient` (every [`GridKind`] of every alpha: one set), each
+    /// written once straight into its loaned sample.
     fn publish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
+        let alphas = gradient.alphas_deg().count();
+        if alphas > MAX_GRID_ALPHAS {
+            bail!(
+                "the gradient has {alphas} alphas; the grids topic holds a set of at most {MAX_GRID_ALPHAS}"
+            );
+        }
         self.grids_seq += 1;
         let seq = self.grids_seq;
         for alpha in gradient.alphas_deg() {

@@ -71,7 +71,11 @@ fn main() -> anyhow::Result<()> {
                 };
                 let task = Task::Trajectory { path: path.clone() };
                 let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &cfg)?;
-                let poses: Vec<_> = r.samples.iter().map(|s| s.pose).collect();
+                let judged = r
+                    .evaluation
+                    .clone()
+                    .expect("in-process episodes are judged");
+                let poses: Vec<_> = judged.samples.iter().map(|s| s.pose).collect();
                 let e = agp_planner::trajectory_error(&path, &poses).unwrap_or(f64::NAN);
                 let straight: Vec<_> = poses.iter().copied().filter(|p| p.x < 0.27).collect();
                 let bend: Vec<_> = poses.iter().copied().filter(|p| p.x >= 0.27).collect();
@@ -84,13 +88,13 @@ fn main() -> anyhow::Result<()> {
                 );
                 println!(
                     "{planner}: {} {} pushes {} circlings {}, mean error {:.2} mm over {} points, end error {:.1} mm, sim {:.0} s",
-                    if r.success { "OK" } else { "FAIL" },
+                    if judged.success { "OK" } else { "FAIL" },
                     r.end.name(),
                     r.pushes,
                     r.circlings,
                     e * 1e3,
                     poses.len(),
-                    r.position_error_mm,
+                    judged.position_error_mm,
                     r.sim_time_s
                 );
                 sums[i] += e * 1e3 / n as f64;
@@ -126,17 +130,21 @@ fn main() -> anyhow::Result<()> {
             &Task::Place { goal },
             &cfg,
         )?;
+        let e = r
+            .evaluation
+            .clone()
+            .expect("in-process episodes are judged");
         println!(
             "{k}: goal ({:.0}, {:.0}) {:.0} deg: {} {} pushes {} circlings {}, err {:.1} mm {:.1} deg, sim {:.0} s wall {:.1} s",
             goal.x * 1e3,
             goal.y * 1e3,
             goal.theta.to_degrees(),
-            if r.success { "OK" } else { "FAIL" },
+            if e.success { "OK" } else { "FAIL" },
             r.end.name(),
             r.pushes,
             r.circlings,
-            r.position_error_mm,
-            r.orientation_error_deg,
+            e.position_error_mm,
+            e.orientation_error_deg,
             r.sim_time_s,
             r.wall_time_s
         );

@@ -77,7 +77,8 @@ pub struct PlannerSummary {
 }
 
 impl PlannerSummary {
-    /// The summary of `results` (all from one planner).
+    /// The summary of `results` (all from one planner); an episode without an evaluation
+    /// counts as a failure with no errors to report.
     pub fn of(results: &[EpisodeResult]) -> Self {
         let n = results.len();
         let pick = |f: fn(&EpisodeResult) -> f64| results.iter().map(f).collect::<Vec<_>>();
@@ -86,10 +87,18 @@ impl PlannerSummary {
             success_rate: if n == 0 {
                 0.0
             } else {
-                results.iter().filter(|r| r.success).count() as f64 / n as f64
+                results.iter().filter(|r| r.success()).count() as f64 / n as f64
             },
-            median_position_error_mm: median(&pick(|r| r.position_error_mm)),
-            median_orientation_error_deg: median(&pick(|r| r.orientation_error_deg)),
+            median_position_error_mm: median(&pick(|r| {
+                r.evaluation
+                    .as_ref()
+                    .map_or(f64::NAN, |e| e.position_error_mm)
+            })),
+            median_orientation_error_deg: median(&pick(|r| {
+                r.evaluation
+                    .as_ref()
+                    .map_or(f64::NAN, |e| e.orientation_error_deg)
+            })),
             median_pushes: median(&pick(|r| f64::from(r.pushes))),
             sim_time_s: results.iter().map(|r| r.sim_time_s).sum(),
             wall_time_s: results.iter().map(|r| r.wall_time_s).sum(),

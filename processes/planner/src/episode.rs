@@ -27,7 +27,6 @@ use std::time::Instant;
 use agp_affordance::{
     AffordanceGradient, Prediction, ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
 };
-use agp_physics::{Sim, SimBuildError, SimConfig};
 use agp_shared_types::Pose2;
 use agp_world::{Pose, RobotDescription, Scenario};
 use glam::DVec2;
@@ -35,7 +34,8 @@ use glam::DVec2;
 use crate::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, Goal,
     PushChoiceSettings, PushPhase, PushPlanner, PushRoutine, PushSettings, RobotLocalizer,
-    TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, symmetric_angle_error,
+    TravelPhase, TravelRoutine, TravelSettings, World, WorldStepError, orbit_waypoints,
+    symmetric_angle_error,
 };
 
 /// Which planner runs an episode.
@@ -236,6 +236,9 @@ pub enum EpisodeEnd {
 }
 
 impl EpisodeEnd {
+    /// Every end, in declaration order.
+    pub const ALL: [Self; 4] = [Self::Done, Self::MaxPushes, Self::TimeLimit, Self::Lost];
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Done => "done",
@@ -254,11 +257,10 @@ pub struct PoseSample {
     pub pose: Pose2,
 }
 
-/// What an episode did, judged against ground truth.
+/// How an episode ended by ground truth: the evaluation, which only a world offering the
+/// true pose (the in-process physics, the oracle's link) can make.
 #[derive(Debug, Clone, PartialEq)]
-pub struct EpisodeResult {
-    pub planner: PlannerKind,
-    pub end: EpisodeEnd,
+pub struct Evaluation {
     /// Place: the final true pose within the tolerance. Trajectory: the end reached
     /// (the true centroid within the tolerance of the path's end).
     pub success: bool,
@@ -266,14 +268,69 @@ pub struct EpisodeResult {
     pub position_error_mm: f64,
     /// Place: orientation error modulo the symmetry, deg (0 for a trajectory).
     pub orientation_error_deg: f64,
-    pub pushes: u32,
-    /// Circlings that estimated the object's pose (0 for the oracle).
-    pub circlings: u32,
-    pub sim_time_s: f64,
-    pub wall_time_s: f64,
     /// The object's true pose at the start, every `record_every_steps` steps while the
     /// robot pushes, and at the end.
     pub samples: Vec<PoseSample>,
+}
+
+impl Evaluation {
+    /// Judges the object's final true pose `truth` against `task` with the tolerances of
+    /// `config`, orientation modulo the object's symmetry of `order`.
+    pub fn judge(
+        task: &Task,
+        truth: Pose2,
+        order: u32,
+        config: &EpisodeConfig,
+        samples: Vec<PoseSample>,
+    ) -> Self {
+        let (ep, eo, success) = match task {
+            Task::Place { goal } => {
+                let ep = DVec2::new(truth.x - goal.x, truth.y - goal.y).length();
+                let eo = symmetric_angle_error(truth.theta - goal.theta, order).abs();
+                (
+                    ep,
+                    eo,
+                    ep <= config.tolerance_m && eo <= config.tolerance_rad,
+                )
+            }
+            Task::Trajectory { path } => {
+                let end = path.last().copied().unwrap_or_default();
+                let ep = (DVec2::new(truth.x, truth.y) - end).length();
+                (ep, 0.0, ep <= config.tolerance_m)
+            }
+        };
+        Self {
+            success,
+            position_error_mm: ep * 1e3,
+            orientation_error_deg: eo.to_degrees(),
+            samples,
+        }
+    }
+}
+
+/// What an episode did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeResult {
+    pub planner: PlannerKind,
+    pub end: EpisodeEnd,
+    pub pushes: u32,
+    /// Circlings that estimated the object's pose (0 for the oracle).
+    pub circlings: u32,
+    /// Simulated time the episode took, s.
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    /// The planner's last estimate of the object's pose (world frame); the true pose for
+    /// the oracle. `None` if the object was never found.
+    pub final_estimate: Option<Pose2>,
+    /// The evaluation against ground truth, where the world offers it.
+    pub evaluation: Option<Evaluation>,
+}
+
+impl EpisodeResult {
+    /// The evaluation's success (`false` without one).
+    pub fn success(&self) -> bool {
+        self.evaluation.as_ref().is_some_and(|e| e.success)
+    }
 }
 
 /// Why an episode could not start.
@@ -285,15 +342,46 @@ pub enum EpisodeRunError {
     /// The trajectory has fewer than two points.
     #[error("a trajectory needs at least two points")]
     ShortPath,
+    #[cfg(feature = "sim")]
     #[error(transparent)]
-    Sim(#[from] SimBuildError),
+    Sim(#[from] agp_physics::SimBuildError),
     #[error(transparent)]
     Matcher(#[from] ShapeMatcherBuildError),
+    /// The world stopped answering (shutdown, a restarted physics, a broken link).
+    #[error("the episode stopped: {0}")]
+    World(#[from] WorldStepError),
 }
 
-/// Runs one episode of `task` with `planner` on `scenario` (the object and robot at the
-/// scenario's start poses). `ag` is required by the affordance and oracle planners.
+/// Runs one episode of `task` with `planner` on `scenario` against the in-process physics
+/// library (the object and robot at the scenario's start poses, sensor noise seeded by
+/// `config.seed`), evaluated against its ground truth. `ag` is required by the affordance
+/// and oracle planners.
+#[cfg(feature = "sim")]
 pub fn run_episode(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    ag: Option<&AffordanceGradient>,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+) -> Result<EpisodeResult, EpisodeRunError> {
+    let mut sim = agp_physics::Sim::new(
+        scenario,
+        robot,
+        agp_physics::SimConfig {
+            seed: config.seed,
+            ..agp_physics::SimConfig::default()
+        },
+    )?;
+    drive_episode(&mut sim, scenario, robot, ag, planner, task, config)
+}
+
+/// Drives one episode of `task` with `planner` in `world`, from wherever the robot and the
+/// object are (Algorithm 5 starts by finding the object). `scenario` gives the object's
+/// symmetry; `ag` is required by the affordance and oracle planners. The result carries
+/// an evaluation when the world offers ground truth.
+pub fn drive_episode<W: World>(
+    world: &mut W,
     scenario: &Scenario,
     robot: &RobotDescription,
     ag: Option<&AffordanceGradient>,
@@ -348,24 +436,17 @@ pub fn run_episode(
             }
         }
     };
-    let sim = Sim::new(
-        scenario,
-        robot,
-        SimConfig {
-            seed: config.seed,
-            ..SimConfig::default()
-        },
-    )?;
     let mut run = Run {
         localizer: RobotLocalizer::new(config.fix_gain),
         sense: ContactSense::new(robot),
         robot: robot.clone(),
         config,
-        sim,
+        world,
         samples: Vec::new(),
         recording: false,
     };
     run.record();
+    let t0 = run.world.sim_time();
     let mut episode = Episode {
         run,
         brain,
@@ -377,43 +458,30 @@ pub fn run_episode(
         planned_from: None,
         push_longer: false,
         circlings: 0,
+        last_estimate: None,
     };
-    let end = episode.run();
+    let end = episode.run()?;
     let Episode {
         mut run,
         pushes,
         circlings,
+        last_estimate,
         ..
     } = episode;
     run.record();
-    let truth = run.sim.object_pose();
-    let (position_error_mm, orientation_error_deg, success) = match task {
-        Task::Place { goal } => {
-            let ep = DVec2::new(truth.x - goal.x, truth.y - goal.y).length();
-            let eo = symmetric_angle_error(truth.theta - goal.theta, order).abs();
-            (
-                ep * 1e3,
-                eo.to_degrees(),
-                ep <= config.tolerance_m && eo <= config.tolerance_rad,
-            )
-        }
-        Task::Trajectory { path } => {
-            let end_point = path[path.len() - 1];
-            let ep = (truth.position() - end_point).length();
-            (ep * 1e3, 0.0, ep <= config.tolerance_m)
-        }
-    };
+    let evaluation = run.world.object_truth().map(|truth| {
+        let truth = Pose2::new(truth.x, truth.y, truth.theta);
+        Evaluation::judge(task, truth, order, config, std::mem::take(&mut run.samples))
+    });
     Ok(EpisodeResult {
         planner,
         end,
-        success,
-        position_error_mm,
-        orientation_error_deg,
         pushes,
         circlings,
-        sim_time_s: run.sim.sim_time(),
+        sim_time_s: run.world.sim_time() - t0,
         wall_time_s: wall.elapsed().as_secs_f64(),
-        samples: run.samples,
+        final_estimate: last_estimate,
+        evaluation,
     })
 }
 
@@ -476,8 +544,8 @@ impl Estimate {
     }
 }
 
-struct Episode<'a> {
-    run: Run<'a>,
+struct Episode<'a, W: World> {
+    run: Run<'a, W>,
     brain: Brain<'a>,
     planner: PlannerKind,
     task: &'a Task,
@@ -491,6 +559,8 @@ struct Episode<'a> {
     /// The last pushes left the object where it was (a short push that stopped short of
     /// it): the next push is a full one.
     push_longer: bool,
+    /// The latest estimate of the object's pose.
+    last_estimate: Option<Pose2>,
 }
 
 /// Converts the turn penalty (metres per radian of turn) of a steered push into radians
@@ -501,24 +571,25 @@ const STEER_LEVER_M: f64 = 0.05;
 /// Consecutive circlings that may fail before the object counts as lost.
 const MAX_FAILED_ESTIMATES: u32 = 3;
 
-impl Episode<'_> {
-    fn run(&mut self) -> EpisodeEnd {
+impl<W: World> Episode<'_, W> {
+    fn run(&mut self) -> Result<EpisodeEnd, WorldStepError> {
         let config = self.run.config;
         let oracle = self.planner.reads_ground_truth();
         // findObj + EstimateOrientationObj: the robot starts facing the object.
         let mut est = if oracle {
-            Estimate::fresh(self.oracle_truth())
+            Estimate::fresh(self.oracle_truth()?)
         } else {
-            match self.estimate(None) {
+            match self.estimate(None)? {
                 Some(e) => e,
-                None => return EpisodeEnd::Lost,
+                None => return Ok(EpisodeEnd::Lost),
             }
         };
         let mut failed = 0;
         loop {
             if oracle {
-                est = Estimate::fresh(self.oracle_truth());
+                est = Estimate::fresh(self.oracle_truth()?);
             }
+            self.last_estimate = Some(est.pose);
             if est.pushes_since == 0
                 && let Some(before) = self.planned_from.take()
             {
@@ -538,9 +609,9 @@ impl Episode<'_> {
             }
             if self.done(&est) {
                 if est.pushes_since == 0 {
-                    return EpisodeEnd::Done;
+                    return Ok(EpisodeEnd::Done);
                 }
-                match self.estimate(Some(est.pose)) {
+                match self.estimate(Some(est.pose))? {
                     Some(e) => {
                         est = e;
                         failed = 0;
@@ -549,19 +620,19 @@ impl Episode<'_> {
                     None => {
                         failed += 1;
                         if failed >= MAX_FAILED_ESTIMATES {
-                            return EpisodeEnd::Lost;
+                            return Ok(EpisodeEnd::Lost);
                         }
                     }
                 }
             }
             if self.pushes >= config.max_pushes {
-                return EpisodeEnd::MaxPushes;
+                return Ok(EpisodeEnd::MaxPushes);
             }
-            if self.run.sim.sim_time() > config.max_sim_time_s {
-                return EpisodeEnd::TimeLimit;
+            if self.run.elapsed() > config.max_sim_time_s {
+                return Ok(EpisodeEnd::TimeLimit);
             }
             let Some(order) = self.plan(&est) else {
-                return EpisodeEnd::Lost;
+                return Ok(EpisodeEnd::Lost);
             };
             if est.pushes_since == 0 {
                 self.planned_from = Some(est.pose);
@@ -579,16 +650,16 @@ impl Episode<'_> {
                 order.duration
             ));
             let mut touched = false;
-            if self.run.travel(est.position(), order.orbit, order.start) {
+            if self.run.travel(est.position(), order.orbit, order.start)? {
                 let pushed = self
                     .run
-                    .push(order.duration, order.orbit + 0.03, !order.retry);
+                    .push(order.duration, order.orbit + 0.03, !order.retry)?;
                 if let Some(done) = pushed {
                     touched = true;
                     self.pushes += 1;
                     est = self.update(est, &order, done);
                 }
-                self.run.backoff();
+                self.run.backoff()?;
             }
             if !touched {
                 self.trace(format_args!("no contact"));
@@ -596,7 +667,7 @@ impl Episode<'_> {
                 est.error_m = f64::INFINITY;
             }
             if self.needs_estimate(&est) {
-                match self.estimate(Some(est.pose)) {
+                match self.estimate(Some(est.pose))? {
                     Some(e) => {
                         est = e;
                         failed = 0;
@@ -604,7 +675,7 @@ impl Episode<'_> {
                     None => {
                         failed += 1;
                         if failed >= MAX_FAILED_ESTIMATES {
-                            return EpisodeEnd::Lost;
+                            return Ok(EpisodeEnd::Lost);
                         }
                     }
                 }
@@ -616,24 +687,32 @@ impl Episode<'_> {
     /// (read here only, never by a decision).
     fn trace(&self, what: std::fmt::Arguments<'_>) {
         if self.run.config.trace {
-            let truth = self.run.sim.object_pose();
+            let truth = self.run.world.object_truth().map_or(String::new(), |t| {
+                format!(
+                    " [truth ({:.1}, {:.1}) mm {:.1} deg]",
+                    t.x * 1e3,
+                    t.y * 1e3,
+                    t.theta.to_degrees()
+                )
+            });
             eprintln!(
-                "[{} t={:.1}s push {}] {what} [truth ({:.1}, {:.1}) mm {:.1} deg]",
+                "[{} t={:.1}s push {}] {what}{truth}",
                 self.planner,
-                self.run.sim.sim_time(),
+                self.run.world.sim_time(),
                 self.pushes,
-                truth.x * 1e3,
-                truth.y * 1e3,
-                truth.theta.to_degrees()
             );
         }
     }
 
     /// The object's true pose: the oracle's input, and nobody else's.
-    fn oracle_truth(&self) -> Pose2 {
+    fn oracle_truth(&self) -> Result<Pose2, WorldStepError> {
         debug_assert!(self.planner.reads_ground_truth());
-        let p = self.run.sim.object_pose();
-        Pose2::new(p.x, p.y, p.theta)
+        let p = self.run.world.object_truth().ok_or_else(|| {
+            WorldStepError::Link(
+                "the oracle needs the object's true pose, which this world does not offer".into(),
+            )
+        })?;
+        Ok(Pose2::new(p.x, p.y, p.theta))
     }
 
     /// The point the centroid should head for, and whether the task is done, by `est`.
@@ -882,7 +961,7 @@ impl Episode<'_> {
     /// EstimateOrientationObj: face the estimated centroid (if any), approach to the
     /// circling's gap, circle once, and match the border to S (or, for the baseline, take
     /// the centroid of the circled border). `None` if the circling found too little.
-    fn estimate(&mut self, guess: Option<Pose2>) -> Option<Estimate> {
+    fn estimate(&mut self, guess: Option<Pose2>) -> Result<Option<Estimate>, WorldStepError> {
         self.circlings += 1;
         let gap = self.run.config.circle.gap + 0.002;
         // Drive at most a little past the guessed centroid: a guess far off must not send
@@ -890,17 +969,17 @@ impl Episode<'_> {
         let mut timeout = 5.0;
         if let Some(g) = guess {
             let centre = DVec2::new(g.x, g.y);
-            self.run.face(centre);
+            self.run.face(centre)?;
             let d = (centre - self.run.pose().position()).length();
             timeout = ((d + 0.05) / self.run.config.push.approach_speed).min(timeout);
         }
-        if !self.run.approach_to_gap(gap, timeout) {
+        if !self.run.approach_to_gap(gap, timeout)? {
             self.trace(format_args!("approach saw nothing"));
-            return None;
+            return Ok(None);
         }
-        let Some(points) = self.run.circle() else {
+        let Some(points) = self.run.circle()? else {
             self.trace(format_args!("circling failed"));
-            return None;
+            return Ok(None);
         };
         self.trace(format_args!("circled: {} points", points.len()));
         match &mut self.brain {
@@ -911,14 +990,16 @@ impl Episode<'_> {
                     pose.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
                     guess.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
                 ));
-                Some(Estimate::fresh(pose?))
+                Ok(pose.map(Estimate::fresh))
             }
             Brain::Baseline { radius } => {
-                let c = border_centroid(&points)?;
+                let Some(c) = border_centroid(&points) else {
+                    return Ok(None);
+                };
                 let r = points.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
                 radius.get_or_insert(r);
                 let theta = guess.map_or(0.0, |g| g.theta);
-                Some(Estimate::fresh(Pose2::new(c.x, c.y, theta)))
+                Ok(Some(Estimate::fresh(Pose2::new(c.x, c.y, theta))))
             }
         }
     }
@@ -939,9 +1020,9 @@ struct PushDone {
     front_gap: Option<f64>,
 }
 
-/// The simulation as the robot drives it, with the robot's own pose estimate.
-struct Run<'a> {
-    sim: Sim,
+/// The world as the robot drives it, with the robot's own pose estimate.
+struct Run<'a, W: World> {
+    world: &'a mut W,
     robot: RobotDescription,
     sense: ContactSense,
     localizer: RobotLocalizer,
@@ -950,35 +1031,43 @@ struct Run<'a> {
     recording: bool,
 }
 
-impl Run<'_> {
+impl<W: World> Run<'_, W> {
     /// The robot's pose as it knows it (odometry and the overhead fix).
     fn pose(&mut self) -> Pose {
-        let s = self.sim.sensors();
+        let s = self.world.senses();
         self.localizer.update(s.odometry, s.fix, s.fix_seq)
     }
 
-    fn record(&mut self) {
-        let p = self.sim.object_pose();
-        self.samples.push(PoseSample {
-            t_s: self.sim.sim_time(),
-            pose: Pose2::new(p.x, p.y, p.theta),
-        });
+    /// Simulated time since the episode began, s.
+    fn elapsed(&self) -> f64 {
+        self.world.sim_time() - self.samples.first().map_or(0.0, |s| s.t_s)
     }
 
-    fn step(&mut self, left: f64, right: f64) {
-        self.sim.step(left, right);
+    /// Records the object's true pose, where the world offers it (evaluation only).
+    fn record(&mut self) {
+        if let Some(p) = self.world.object_truth() {
+            self.samples.push(PoseSample {
+                t_s: self.world.sim_time(),
+                pose: Pose2::new(p.x, p.y, p.theta),
+            });
+        }
+    }
+
+    fn step(&mut self, left: f64, right: f64) -> Result<(), WorldStepError> {
+        self.world.step(left, right)?;
         if self.recording
             && self
-                .sim
+                .world
                 .step_count()
                 .is_multiple_of(self.config.record_every_steps.max(1))
         {
             self.record();
         }
+        Ok(())
     }
 
     /// Turns in place to face `point`.
-    fn face(&mut self, point: DVec2) {
+    fn face(&mut self, point: DVec2) -> Result<bool, WorldStepError> {
         let pose = self.pose();
         let heading = (point - pose.position()).to_angle();
         let mut travel = TravelRoutine::new(
@@ -988,23 +1077,23 @@ impl Run<'_> {
             Vec::new(),
             heading,
         );
-        self.drive_travel(&mut travel, 10.0);
+        self.drive_travel(&mut travel, 10.0)
     }
 
     /// Drives forward until the front gap is at most `gap` (m), or stops shrinking while
     /// the object is in sight (a corner met head-on slips between the front rays: the
     /// robot would push it), or `timeout` s pass.
-    fn approach_to_gap(&mut self, gap: f64, timeout: f64) -> bool {
-        let t0 = self.sim.sim_time();
+    fn approach_to_gap(&mut self, gap: f64, timeout: f64) -> Result<bool, WorldStepError> {
+        let t0 = self.world.sim_time();
         let speed = self.config.push.approach_speed;
         // The front gap at each of the last IR samples, newest first.
         let mut gaps = [None; 6];
         let mut last_sample = None;
-        while self.sim.sim_time() - t0 < timeout {
-            let s = *self.sim.sensors();
+        while self.world.sim_time() - t0 < timeout {
+            let s = self.world.senses();
             let now = self.sense.front_gap(&s.ir_raw);
             if now.is_some_and(|g| g <= gap) {
-                return true;
+                return Ok(true);
             }
             if last_sample != Some(s.ir_sample) {
                 last_sample = Some(s.ir_sample);
@@ -1014,44 +1103,46 @@ impl Run<'_> {
                     // A free approach closes 5 samples' travel (6 mm at 80 mm/s).
                     let expected = speed * 5.0 / self.robot.ir_rate_hz;
                     if b - a < 0.25 * expected {
-                        return true;
+                        return Ok(true);
                     }
                 }
             }
-            self.step(speed, speed);
+            self.step(speed, speed)?;
         }
-        false
+        Ok(false)
     }
 
     /// One circling; the border points (robot's frame) if the lap closed or gave enough.
-    fn circle(&mut self) -> Option<Vec<DVec2>> {
-        let mut routine = CircleRoutine::new(self.config.circle, &self.robot, self.sim.sim_time());
+    fn circle(&mut self) -> Result<Option<Vec<DVec2>>, WorldStepError> {
+        let mut routine =
+            CircleRoutine::new(self.config.circle, &self.robot, self.world.sim_time());
         loop {
             let pose = self.pose();
-            let s = *self.sim.sensors();
-            let (l, r) = routine.update(self.sim.sim_time(), s.ir_sample, pose, &s.ir_raw);
+            let s = self.world.senses();
+            let (l, r) = routine.update(self.world.sim_time(), s.ir_sample, pose, &s.ir_raw);
             if let CirclePhase::Done { outcome, .. } = routine.phase() {
                 let points = routine.border_points();
                 let enough = points.len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
-                return (outcome == CircleOutcome::Closed
+                return Ok((outcome == CircleOutcome::Closed
                     || (outcome == CircleOutcome::Timeout && enough))
-                    .then(|| points.to_vec());
+                    .then(|| points.to_vec()));
             }
-            self.step(l, r);
+            self.step(l, r)?;
         }
     }
 
     /// Backs off after a push.
-    fn backoff(&mut self) {
-        let t0 = self.sim.sim_time();
+    fn backoff(&mut self) -> Result<(), WorldStepError> {
+        let t0 = self.world.sim_time();
         let v = -self.config.backoff_speed;
-        while self.sim.sim_time() - t0 < self.config.backoff_s {
-            self.step(v, v);
+        while self.world.sim_time() - t0 < self.config.backoff_s {
+            self.step(v, v)?;
         }
+        Ok(())
     }
 
     /// Out to the circle of radius `orbit` round `centre`, along it, and into `start`.
-    fn travel(&mut self, centre: DVec2, orbit: f64, start: Pose2) -> bool {
+    fn travel(&mut self, centre: DVec2, orbit: f64, start: Pose2) -> Result<bool, WorldStepError> {
         let pose = self.pose();
         let target = DVec2::new(start.x, start.y);
         let way = orbit_waypoints(
@@ -1071,22 +1162,31 @@ impl Run<'_> {
         self.drive_travel(&mut travel, 30.0)
     }
 
-    fn drive_travel(&mut self, travel: &mut TravelRoutine, timeout: f64) -> bool {
-        let t0 = self.sim.sim_time();
-        while self.sim.sim_time() - t0 < timeout {
+    fn drive_travel(
+        &mut self,
+        travel: &mut TravelRoutine,
+        timeout: f64,
+    ) -> Result<bool, WorldStepError> {
+        let t0 = self.world.sim_time();
+        while self.world.sim_time() - t0 < timeout {
             let pose = self.pose();
             let (l, r) = travel.update(pose);
             if travel.phase() == TravelPhase::Done {
-                return true;
+                return Ok(true);
             }
-            self.step(l, r);
+            self.step(l, r)?;
         }
-        false
+        Ok(false)
     }
 
     /// Approach until the IR says contact, then push for `duration` s; `None` if the
     /// approach saw nothing close.
-    fn push(&mut self, duration: f64, reach: f64, stall_contact: bool) -> Option<PushDone> {
+    fn push(
+        &mut self,
+        duration: f64,
+        reach: f64,
+        stall_contact: bool,
+    ) -> Result<Option<PushDone>, WorldStepError> {
         // A push that misses must not drive far past the object.
         let settings = PushSettings {
             push_duration: duration,
@@ -1098,12 +1198,12 @@ impl Run<'_> {
                 .min(reach / self.config.push.approach_speed),
             ..self.config.push
         };
-        let mut routine = PushRoutine::new(settings, self.sim.sim_time());
+        let mut routine = PushRoutine::new(settings, self.world.sim_time());
         let mut contact = None;
         loop {
             let pose = self.pose();
-            let s = *self.sim.sensors();
-            let (l, r) = routine.update(&self.sense, self.sim.sim_time(), s.ir_sample, &s.ir_raw);
+            let s = self.world.senses();
+            let (l, r) = routine.update(&self.sense, self.world.sim_time(), s.ir_sample, &s.ir_raw);
             match routine.phase() {
                 PushPhase::Push { .. } => {
                     if contact.is_none() {
@@ -1114,24 +1214,24 @@ impl Run<'_> {
                 PushPhase::Done { contact: touched } => {
                     self.recording = false;
                     // Let the object come to rest before anything is read off it.
-                    let t0 = self.sim.sim_time();
-                    while self.sim.sim_time() - t0 < 0.2 {
-                        self.step(0.0, 0.0);
+                    let t0 = self.world.sim_time();
+                    while self.world.sim_time() - t0 < 0.2 {
+                        self.step(0.0, 0.0)?;
                     }
                     let end = self.pose();
-                    let front_gap = self.sense.front_gap(&self.sim.sensors().ir_raw);
-                    return match (touched, contact) {
+                    let front_gap = self.sense.front_gap(&self.world.senses().ir_raw);
+                    return Ok(match (touched, contact) {
                         (true, Some(contact)) => Some(PushDone {
                             contact,
                             end,
                             front_gap,
                         }),
                         _ => None,
-                    };
+                    });
                 }
                 PushPhase::Approach { .. } => {}
             }
-            self.step(l, r);
+            self.step(l, r)?;
         }
     }
 }

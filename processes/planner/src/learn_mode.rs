@@ -494,6 +494,7 @@ fn learn(learner: &mut Learner<'_>, scenario: &Scenario) -> Result<()> {
     );
     let n = settings.trials_per_alpha;
     let mut index = 0;
+    let mut progress = Progress::new(learner.total);
     for alpha in ALPHAS_DEG {
         for k in 0..n {
             let phi = TAU * f64::from(k) / f64::from(n);
@@ -515,31 +516,30 @@ fn learn(learner: &mut Learner<'_>, scenario: &Scenario) -> Result<()> {
                 ],
                 settings.timeout,
             )?;
-            let verdict = if r.kind == LearnReportKind::TrialLearned as u32 {
-                format!(
-                    "learned (moved {:.1} mm, turned {:+.1} deg)",
-                    DVec2::from(r.displacement).length() * 1e3,
-                    r.rotation_rad.to_degrees()
-                )
-            } else {
-                "rejected".to_owned()
-            };
-            println!(
-                "trial {index}/{} alpha {alpha:+.0} deg from {:.0} deg: {}; estimator: {verdict}, {} learned, {} rejected so far; sim {:.1} s, wall {:.1} s",
-                learner.total,
-                phi.to_degrees(),
-                match run {
-                    TrialRun::NoContact => "no contact",
-                    TrialRun::Pushed { lap_closed: true } => "pushed, lap closed",
-                    TrialRun::Pushed { lap_closed: false } => "pushed, lap not closed",
-                },
-                r.trials_learned,
-                r.trials_rejected,
-                learner.frame().sim_time_s,
-                wall.elapsed().as_secs_f64(),
-            );
+            if r.kind != LearnReportKind::TrialLearned as u32
+                || !matches!(run, TrialRun::Pushed { lap_closed: true })
+            {
+                let line = format!(
+                    "trial {index}/{} alpha {alpha:+.0} deg from {:.0} deg: {}; estimator: {}",
+                    learner.total,
+                    phi.to_degrees(),
+                    match run {
+                        TrialRun::NoContact => "no contact",
+                        TrialRun::Pushed { lap_closed: true } => "pushed, lap closed",
+                        TrialRun::Pushed { lap_closed: false } => "pushed, lap not closed",
+                    },
+                    if r.kind == LearnReportKind::TrialLearned as u32 {
+                        "learned"
+                    } else {
+                        "rejected"
+                    }
+                );
+                progress.note(&line);
+            }
+            progress.show(index, r.trials_learned, r.trials_rejected);
         }
     }
+    progress.finish();
     let f = learner.frame();
     let done = learner.event(LearnEventKind::LearningDone);
     learner.link.send(done, &f)?;
@@ -560,4 +560,69 @@ fn learn(learner: &mut Learner<'_>, scenario: &Scenario) -> Result<()> {
         bail!("the estimator could not save the AG file");
     }
     Ok(())
+}
+
+/// The learning phase's progress bar: trials done, learned and rejected, time spent and
+/// about how much is left. Redrawn in place on a terminal; every tenth of the way (one line
+/// each) when the output goes to a file or a supervisor.
+struct Progress {
+    total: u32,
+    start: std::time::Instant,
+    tty: bool,
+    shown: u32,
+}
+
+impl Progress {
+    fn new(total: u32) -> Self {
+        use std::io::IsTerminal;
+        Self {
+            total: total.max(1),
+            start: std::time::Instant::now(),
+            tty: std::io::stdout().is_terminal(),
+            shown: 0,
+        }
+    }
+
+    fn line(&self, done: u32, learned: u32, rejected: u32) -> String {
+        const WIDTH: u32 = 30;
+        let filled = (WIDTH * done / self.total) as usize;
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let left = if done > 0 {
+            elapsed / f64::from(done) * f64::from(self.total - done.min(self.total))
+        } else {
+            f64::NAN
+        };
+        format!(
+            "learning [{}{}] {done}/{} trials, {learned} learned, {rejected} rejected, {elapsed:.1} s, about {left:.0} s left",
+            "#".repeat(filled),
+            ".".repeat(WIDTH as usize - filled),
+            self.total
+        )
+    }
+
+    fn show(&mut self, done: u32, learned: u32, rejected: u32) {
+        use std::io::Write;
+        let line = self.line(done, learned, rejected);
+        if self.tty {
+            print!("\r{line}");
+            let _ = std::io::stdout().flush();
+        } else if done * 10 / self.total > self.shown * 10 / self.total || done == self.total {
+            println!("{line}");
+        }
+        self.shown = done;
+    }
+
+    /// A line of its own above the bar.
+    fn note(&self, line: &str) {
+        if self.tty {
+            print!("\r\x1b[2K");
+        }
+        println!("{line}");
+    }
+
+    fn finish(&self) {
+        if self.tty {
+            println!();
+        }
+    }
 }

@@ -1,13 +1,15 @@
 //! The planner process: chooses and carries out pushes.
 
+mod grid_link;
 mod learn_mode;
+mod task_mode;
 
 use std::time::Duration;
 
-use agp_planner::{ContactSense, PushPhase, PushRoutine, PushSettings};
+use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_shared_types::{
     ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver, Pose2,
-    install_shutdown_handler, monotonic_ns, stage,
+    TaskKind, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, bail};
@@ -24,6 +26,14 @@ enum Mode {
     /// estimator each step of the protocol; ends when the estimator reports the gradients
     /// learned and saved. Needs physics and `agp-estimator` in lockstep.
     Learn,
+    /// The placement task (benchmarks.md section 3): the paper's Algorithm 5 puts the
+    /// object at the goal (`--goal`, else the scenario's) within the scenario's tolerance,
+    /// knowing it through IR only. The affordance and oracle planners take the gradient
+    /// from the estimator's grids. Ends when the planner's estimate says it is done.
+    Place,
+    /// The trajectory task (benchmarks.md section 2): push the object's centroid along the
+    /// scenario's path (`path_mm`, else 600 mm along +x from the object's start).
+    Trajectory,
 }
 
 /// Chooses pushes and drives the robot.
@@ -55,6 +65,27 @@ struct Args {
     /// Learn: trials per alpha, evenly spread round the object (60: one every 6 deg).
     #[arg(long, default_value_t = 60)]
     trials_per_alpha: u32,
+    /// Place, trajectory: which planner decides (`oracle` reads the object's true pose).
+    #[arg(long, default_value = "affordance")]
+    planner: PlannerKind,
+    /// Place: the goal, `X_MM,Y_MM,THETA_DEG` in the world frame (default: the scenario's).
+    #[arg(long, value_parser = parse_goal, allow_hyphen_values = true)]
+    goal: Option<Pose2>,
+    /// Place, trajectory: run the learning phase first when the AG file
+    /// `<results>/<object>.ag` is missing (run the estimator with `--reuse`, which then
+    /// learns; it publishes the saved gradients when the file is there).
+    #[arg(long)]
+    learn_if_missing: bool,
+    /// Folder of the AG files (`<object>.ag`).
+    #[arg(long, env = "AGP_RESULTS", default_value = "results")]
+    results: std::path::PathBuf,
+    /// Print every estimate and push on stderr.
+    #[arg(long)]
+    trace: bool,
+    /// Place, trajectory: also write the planner's account of the episode (how it ended,
+    /// pushes, circlings, times, its last estimate; no ground truth) as JSON to this file.
+    #[arg(long)]
+    report: Option<std::path::PathBuf>,
     /// The epoch this planner drives at. 0: from the start. Set by the supervisor for a hot
     /// swap: the planner then tells it when it is ready, waits for its epoch to become
     /// active, and reports its first applied command.
@@ -110,6 +141,23 @@ impl SwapIn {
 /// Safety net of the waits on other processes.
 const TIMEOUT: Duration = Duration::from_secs(30);
 
+/// `X_MM,Y_MM,THETA_DEG` as a world-frame pose in metres and radians.
+fn parse_goal(s: &str) -> Result<Pose2, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}; expected X_MM,Y_MM,THETA_DEG"))?;
+    match v[..] {
+        [x, y, t] if v.iter().all(|a| a.is_finite()) => {
+            Ok(Pose2::new(x * 1e-3, y * 1e-3, t.to_radians()))
+        }
+        _ => Err(format!(
+            "`{s}`: expected three finite numbers X_MM,Y_MM,THETA_DEG"
+        )),
+    }
+}
+
 fn main() {
     if let Err(e) = run() {
         eprintln!("agp-planner: error: {e:#}");
@@ -146,6 +194,46 @@ fn run() -> Result<()> {
                 TIMEOUT,
             );
             learn_mode::run(&instance, &scenario, args.epoch, &settings)
+        }
+        Mode::Place | Mode::Trajectory => {
+            if args.clock != "lockstep" {
+                bail!("the tasks need the lockstep clock, not `{}`", args.clock);
+            }
+            let ag_file = args.results.join(format!("{}.ag", scenario.name));
+            if args.learn_if_missing && args.epoch == 0 && !ag_file.exists() {
+                println!(
+                    "planner: no AG file at {}: learning `{}` first",
+                    ag_file.display(),
+                    scenario.name
+                );
+                let settings = learn_mode::LearnSettings::new(
+                    args.trials_per_alpha,
+                    args.push_ms.unwrap_or(500),
+                    TIMEOUT,
+                );
+                learn_mode::run(&instance, &scenario, args.epoch, &settings)?;
+                if agp_shared_types::shutdown_requested() {
+                    return Ok(());
+                }
+            }
+            let kind = if args.mode == Mode::Place {
+                TaskKind::Place
+            } else {
+                TaskKind::Trajectory
+            };
+            let settings = task_mode::TaskSettings {
+                planner: args.planner,
+                task: task_mode::task_of(&scenario, kind, args.goal),
+                epoch: args.epoch,
+                timeout: TIMEOUT,
+                gradient_timeout: Duration::from_secs(120),
+                trace: args.trace,
+            };
+            let result = task_mode::run(&instance, &scenario, &settings)?;
+            if let (Some(path), Some(r)) = (&args.report, &result) {
+                task_mode::write_report(path, r)?;
+            }
+            Ok(())
         }
     }
 }

@@ -44,20 +44,24 @@ fn placed(
             let task = Task::Place { goal: **goal };
             let r = run_episode(scenario, robot, Some(ag), planner, &task, &config)
                 .expect("the episode runs");
+            let e = r
+                .evaluation
+                .clone()
+                .expect("in-process episodes are judged");
             println!(
                 "{planner} to ({:.0}, {:.0}) mm, {:.0} deg: {} ({}) after {} pushes, {} circlings, \
                  error {:.1} mm, {:.1} deg",
                 goal.x * 1e3,
                 goal.y * 1e3,
                 goal.theta.to_degrees(),
-                if r.success { "placed" } else { "NOT placed" },
+                if e.success { "placed" } else { "NOT placed" },
                 r.end.name(),
                 r.pushes,
                 r.circlings,
-                r.position_error_mm,
-                r.orientation_error_deg
+                e.position_error_mm,
+                e.orientation_error_deg
             );
-            r.success
+            e.success
         })
         .count()
 }
@@ -105,9 +109,10 @@ fn the_baselines_centroid_pushes_bring_the_object_towards_the_goal_without_a_gra
         &config,
     )
     .expect("the baseline runs without a gradient");
+    let e = r.evaluation.expect("in-process episodes are judged");
     assert_eq!(r.end, EpisodeEnd::MaxPushes);
     let start = DVec2::new(goal.x, goal.y).length();
-    let end = r.position_error_mm * 1e-3;
+    let end = e.position_error_mm * 1e-3;
     // Three pushes of about 45 mm each, through the centroid towards the goal.
     assert!(
         start - end > 0.1,
@@ -141,16 +146,24 @@ fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does
     for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
         let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
             .expect("the episode runs");
-        let poses: Vec<Pose2> = r.samples.iter().map(|s| s.pose).collect();
+        let judged = r
+            .evaluation
+            .clone()
+            .expect("in-process episodes are judged");
+        let poses: Vec<Pose2> = judged.samples.iter().map(|s| s.pose).collect();
         let e = trajectory_error(&path, &poses).expect("recorded poses");
         println!(
             "{planner}: mean error {:.2} mm over {} points, {} pushes, end {:.1} mm off",
             e * 1e3,
             poses.len(),
             r.pushes,
-            r.position_error_mm
+            judged.position_error_mm
         );
-        assert!(r.success, "{planner} did not reach the end: {:?}", r.end);
+        assert!(
+            judged.success,
+            "{planner} did not reach the end: {:?}",
+            r.end
+        );
         // The object is recorded while it is pushed, about every 50 ms: a 600 mm line at
         // about 45 mm per push is over 50 points.
         assert!(poses.len() > 50, "{planner}: {} points", poses.len());

@@ -65,8 +65,32 @@ pub struct BenchLearnArgs {
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
     /// Folder for the learned AG files (`<object>.ag`) and their plots (`<object>.svg`).
-    #[arg(long, value_name = "DIR", default_value = "results/learn")]
+    #[arg(long, value_name = "DIR", default_value = DEFAULT_OUT)]
     pub out: PathBuf,
+}
+
+/// Where `agp bench learn` puts AG files and plots unless told otherwise.
+pub const DEFAULT_OUT: &str = "results/learn";
+
+impl BenchLearnArgs {
+    /// The benchmark's protocol for one object, its files in `out`.
+    pub fn for_scenario(scenario: &str, out: PathBuf) -> Self {
+        Self {
+            scenarios: vec![scenario.to_owned()],
+            seed: 7,
+            alphas: PAPER_ALPHAS_DEG.to_vec(),
+            eval: MIN_EVAL_PUSHES,
+            trials: PAPER_TRIALS_PER_ALPHA,
+            push_s: 0.5,
+            json: None,
+            out,
+        }
+    }
+}
+
+/// The AG file `agp bench learn` writes for `scenario`'s object in `out`.
+pub fn ag_path(out: &Path, scenario: &Scenario) -> PathBuf {
+    out.join(format!("{}.ag", file_stem(&scenario.name)))
 }
 
 /// One object to learn, resolved before anything runs.
@@ -359,7 +383,7 @@ fn write_files(
     cfg: &LearnBenchConfig,
     report: &ObjectReport,
 ) -> Result<(PathBuf, PathBuf)> {
-    let ag_path = args.out.join(format!("{}.ag", job.stem));
+    let ag_path = ag_path(&args.out, &job.scenario);
     report
         .gradient
         .save(&ag_path)

@@ -1,9 +1,11 @@
 //! `agp bench place` and `agp bench trajectory`: the paper's two tasks (benchmarks.md
 //! sections 2 and 3) over many episodes, each planner on the same goals and seeds.
 //!
-//! The physics runs in-process here (the `agp_physics` library stepped directly, no
-//! iceoryx2, no child processes): the episodes are the planners' logic against the same
-//! simulator the pipeline runs, without the transport. Every output says so.
+//! Episodes run over the real pipeline by default ([`PipelineBench`]: lockstep
+//! `agp-physics`, `agp-estimator` serving the AG file, an `agp-planner` process per
+//! episode, ground truth read by the benchmark only); `--in-process` steps the physics
+//! library directly instead (the same planner logic and simulator, no transport), and every
+//! output says which.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -12,12 +14,15 @@ use std::time::Instant;
 
 use agp_affordance::AffordanceGradient;
 use agp_planner::{
-    EpisodeConfig, EpisodeResult, PlannerKind, PlannerSummary, PoseSample, Task, place_goals,
-    run_episode, trajectory_error, trajectory_path,
+    EpisodeConfig, EpisodeResult, Evaluation, PlannerKind, PlannerSummary, PoseSample, Task,
+    place_goals, run_episode, trajectory_error, trajectory_path,
 };
 use agp_shared_types::Pose2;
 use agp_world::{ObjectShape, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
+
+use crate::bench_learn;
+use crate::pipeline_bench::PipelineBench;
 use glam::DVec2;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::coord::Shift;
@@ -25,7 +30,9 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 /// What every bench output says about where the physics ran.
-const PHYSICS_NOTE: &str = "physics in-process (agp_physics library, no iceoryx2)";
+const PIPELINE_NOTE: &str =
+    "over the pipeline (agp-physics, agp-estimator, one agp-planner per episode, iceoryx2)";
+const IN_PROCESS_NOTE: &str = "physics in-process (agp_physics library, no iceoryx2)";
 const ORACLE_NOTE: &str = "`oracle` reads the object's true pose (ground truth): an upper bound";
 
 /// The options of `agp bench place`.
@@ -47,10 +54,14 @@ pub struct BenchPlaceArgs {
         default_value = "affordance,baseline,oracle"
     )]
     pub planners: Vec<PlannerKind>,
-    /// Affordance gradient file learned from IR (`agp learn` or the estimator's
-    /// `learn_report --save-dir`); required by the affordance and oracle planners.
+    /// Affordance gradient file learned from IR (default: `results/learn/<object>.ag`,
+    /// learned first with `agp bench learn` when missing).
     #[arg(long)]
     pub ag: Option<PathBuf>,
+    /// Step the physics library in-process instead of running the pipeline's processes
+    /// (the same planner logic and simulator; faster, no transport).
+    #[arg(long)]
+    pub in_process: bool,
     /// Also write the result as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -67,12 +78,16 @@ pub struct BenchTrajectoryArgs {
     /// along +x then 200 mm at 45 deg.
     #[arg(long, default_value = "lshape")]
     pub scenario: String,
-    /// Affordance gradient file learned from IR; required (the affordance planner).
+    /// Affordance gradient file learned from IR (default: `results/learn/<object>.ag`,
+    /// learned first with `agp bench learn` when missing).
     #[arg(long)]
     pub ag: Option<PathBuf>,
     /// Seed of the sensor noise (default: the scenario's).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Step the physics library in-process instead of running the pipeline's processes.
+    #[arg(long)]
+    pub in_process: bool,
     /// Also write the result as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -147,16 +162,145 @@ struct TrajectoryJson {
     wall_time_s: f64,
 }
 
-fn load_ag(path: Option<&Path>, needed_by: &[PlannerKind]) -> Result<Option<AffordanceGradient>> {
-    let Some(path) = path else {
-        if let Some(k) = needed_by.iter().find(|k| k.needs_gradient()) {
-            bail!("planner `{k}` needs an affordance gradient: pass `--ag FILE` (learned from IR)");
-        }
+/// The AG file the affordance and oracle planners use: `path`, or the learning
+/// benchmark's file for the object, learned first (and said so) when it is missing.
+/// `None` when no planner of `needed_by` needs one.
+pub fn resolve_ag(
+    path: Option<&Path>,
+    scenario_arg: &str,
+    scenario: &Scenario,
+    needed_by: &[PlannerKind],
+) -> Result<Option<PathBuf>> {
+    if !needed_by.iter().any(|k| k.needs_gradient()) {
         return Ok(None);
-    };
-    let ag = AffordanceGradient::load(path)
-        .with_context(|| format!("cannot load the affordance gradient `{}`", path.display()))?;
-    Ok(Some(ag))
+    }
+    if let Some(path) = path {
+        if !path.is_file() {
+            bail!("--ag {}: no such file", path.display());
+        }
+        return Ok(Some(path.to_owned()));
+    }
+    let out = PathBuf::from(bench_learn::DEFAULT_OUT);
+    let learned = bench_learn::ag_path(&out, scenario);
+    if !learned.is_file() {
+        eprintln!(
+            "no affordance gradient of `{}` at {}: learning it first (agp bench learn --scenario {scenario_arg})",
+            scenario.name,
+            learned.display()
+        );
+        bench_learn::run(&bench_learn::BenchLearnArgs::for_scenario(
+            scenario_arg,
+            out,
+        ))?;
+    }
+    Ok(Some(learned))
+}
+
+/// Where episodes run.
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one per benchmark run; boxing buys nothing"
+)]
+enum Runner<'a> {
+    InProcess {
+        scenario: &'a Scenario,
+        robot: RobotDescription,
+        ag: Option<AffordanceGradient>,
+    },
+    Pipeline(PipelineBench),
+}
+
+impl<'a> Runner<'a> {
+    /// A runner for `planner`'s episodes: each planner gets a fresh physics seeded with
+    /// `seed`, so its results do not depend on which planners ran before it.
+    fn start(
+        in_process: bool,
+        scenario_arg: &str,
+        scenario: &'a Scenario,
+        ag: Option<&Path>,
+        planner: PlannerKind,
+        seed: u64,
+    ) -> Result<Self> {
+        let ag = ag.filter(|_| planner.needs_gradient());
+        if in_process {
+            let ag = ag
+                .map(|p| {
+                    AffordanceGradient::load(p).with_context(|| {
+                        format!("cannot load the affordance gradient `{}`", p.display())
+                    })
+                })
+                .transpose()?;
+            Ok(Self::InProcess {
+                scenario,
+                robot: RobotDescription::epuck(),
+                ag,
+            })
+        } else {
+            Ok(Self::Pipeline(PipelineBench::start(
+                scenario_arg,
+                ag,
+                seed,
+            )?))
+        }
+    }
+
+    fn episode(
+        &mut self,
+        planner: PlannerKind,
+        task: &Task,
+        config: &EpisodeConfig,
+    ) -> Result<EpisodeResult> {
+        match self {
+            Self::InProcess {
+                scenario,
+                robot,
+                ag,
+            } => Ok(run_episode(
+                scenario,
+                robot,
+                ag.as_ref(),
+                planner,
+                task,
+                config,
+            )?),
+            Self::Pipeline(bench) => bench.episode(planner, task, config),
+        }
+    }
+
+    fn finish(self) -> Result<()> {
+        match self {
+            Self::InProcess { .. } => Ok(()),
+            Self::Pipeline(bench) => {
+                if bench.truth_gaps > 0 {
+                    eprintln!(
+                        "note: the evaluation missed {} ground-truth samples (its buffer overflowed); the recorded paths have gaps there",
+                        bench.truth_gaps
+                    );
+                }
+                bench.stop()
+            }
+        }
+    }
+}
+
+/// The evaluation of an episode both runners judged.
+fn judged(r: &EpisodeResult) -> &Evaluation {
+    r.evaluation
+        .as_ref()
+        .expect("both runners judge every episode against ground truth")
+}
+
+/// The JSON's `physics` field.
+fn physics_label(in_process: bool) -> &'static str {
+    if in_process { "in-process" } else { "pipeline" }
+}
+
+fn physics_note(in_process: bool) -> &'static str {
+    if in_process {
+        IN_PROCESS_NOTE
+    } else {
+        PIPELINE_NOTE
+    }
 }
 
 fn progress(total: u64) -> ProgressBar {
@@ -185,8 +329,13 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
     }
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
-    let robot = RobotDescription::epuck();
-    let ag = load_ag(args.ag.as_deref(), &args.planners)?;
+    let ag = resolve_ag(
+        args.ag.as_deref(),
+        &args.scenario,
+        &scenario,
+        &args.planners,
+    )?;
+    let note = physics_note(args.in_process);
     let seed = args.seed.unwrap_or(scenario.task.seed);
     let mut planners = args.planners.clone();
     planners.sort();
@@ -195,7 +344,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
     let goals = place_goals(&scenario, args.episodes, seed);
 
     eprintln!(
-        "bench place: scenario `{}`, {} episodes per planner, seed {seed}; {PHYSICS_NOTE}",
+        "bench place: scenario `{}`, {} episodes per planner, seed {seed}; {note}",
         scenario.name, args.episodes
     );
     if planners.contains(&PlannerKind::Oracle) {
@@ -205,31 +354,34 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
     let mut results: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
     for &planner in &planners {
         bar.set_prefix(planner.name());
+        let mut runner = Runner::start(
+            args.in_process,
+            &args.scenario,
+            &scenario,
+            ag.as_deref(),
+            planner,
+            seed,
+        )?;
         let mut runs = Vec::with_capacity(goals.len());
         for (k, goal) in goals.iter().enumerate() {
             let config = EpisodeConfig {
                 seed: seed.wrapping_add(k as u64),
                 ..base.clone()
             };
-            let r = run_episode(
-                &scenario,
-                &robot,
-                ag.as_ref(),
-                planner,
-                &Task::Place { goal: *goal },
-                &config,
-            )
-            .with_context(|| format!("planner `{planner}`, episode {k}"))?;
+            let r = runner
+                .episode(planner, &Task::Place { goal: *goal }, &config)
+                .with_context(|| format!("planner `{planner}`, episode {k}"))?;
             runs.push(r);
             bar.inc(1);
         }
+        runner.finish()?;
         results.insert(planner, runs);
     }
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
 
     println!(
-        "place `{}`: {} episodes per planner, seed {seed}, tolerance {:.0} mm / {:.0} deg; {PHYSICS_NOTE}",
+        "place `{}`: {} episodes per planner, seed {seed}, tolerance {:.0} mm / {:.0} deg; {note}",
         scenario.name,
         args.episodes,
         base.tolerance_m * 1e3,
@@ -276,10 +428,10 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
                         goal_x_mm: g.x * 1e3,
                         goal_y_mm: g.y * 1e3,
                         goal_theta_deg: g.theta.to_degrees(),
-                        success: r.success,
+                        success: r.success(),
                         end: r.end.name(),
-                        position_error_mm: r.position_error_mm,
-                        orientation_error_deg: r.orientation_error_deg,
+                        position_error_mm: judged(r).position_error_mm,
+                        orientation_error_deg: judged(r).orientation_error_deg,
                         pushes: r.pushes,
                         circlings: r.circlings,
                         sim_time_s: r.sim_time_s,
@@ -300,7 +452,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
                 benchmark: "place",
                 scenario: scenario.name.clone(),
                 seed,
-                physics: "in-process",
+                physics: physics_label(args.in_process),
                 tolerance_mm: base.tolerance_m * 1e3,
                 tolerance_deg: base.tolerance_rad.to_degrees(),
                 planners: json_planners,
@@ -322,18 +474,18 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
                         } else {
                             ""
                         },
-                        if r.success { "placed" } else { "not placed" },
+                        if r.success() { "placed" } else { "not placed" },
                         r.pushes,
-                        r.position_error_mm,
-                        r.orientation_error_deg
+                        judged(r).position_error_mm,
+                        judged(r).orientation_error_deg
                     ),
-                    samples: &r.samples,
+                    samples: &judged(r).samples,
                 })
             })
             .collect();
         let goal = goals[0];
         let title = format!(
-            "place `{}`: first episode per planner, goal outline in red ({PHYSICS_NOTE})",
+            "place `{}`: first episode per planner, goal outline in red ({note})",
             scenario.name
         );
         plot_runs(
@@ -353,9 +505,9 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
     let wall = Instant::now();
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
-    let robot = RobotDescription::epuck();
     let planners = [PlannerKind::Affordance, PlannerKind::Baseline];
-    let ag = load_ag(args.ag.as_deref(), &planners)?;
+    let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &planners)?;
+    let note = physics_note(args.in_process);
     let seed = args.seed.unwrap_or(scenario.task.seed);
     let path = trajectory_path(&scenario);
     let config = EpisodeConfig {
@@ -363,7 +515,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
         ..EpisodeConfig::for_scenario(&scenario)
     };
     eprintln!(
-        "bench trajectory: scenario `{}`, seed {seed}; {PHYSICS_NOTE}",
+        "bench trajectory: scenario `{}`, seed {seed}; {note}",
         scenario.name
     );
     let bar = progress(planners.len() as u64);
@@ -371,8 +523,18 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
     let mut runs = Vec::new();
     for planner in planners {
         bar.set_prefix(planner.name());
-        let r = run_episode(&scenario, &robot, ag.as_ref(), planner, &task, &config)
+        let mut runner = Runner::start(
+            args.in_process,
+            &args.scenario,
+            &scenario,
+            ag.as_deref(),
+            planner,
+            seed,
+        )?;
+        let r = runner
+            .episode(planner, &task, &config)
             .with_context(|| format!("planner `{planner}`"))?;
+        runner.finish()?;
         runs.push(r);
         bar.inc(1);
     }
@@ -382,13 +544,13 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
     let errors: Vec<f64> = runs
         .iter()
         .map(|r| {
-            let poses: Vec<Pose2> = r.samples.iter().map(|s| s.pose).collect();
+            let poses: Vec<Pose2> = judged(r).samples.iter().map(|s| s.pose).collect();
             trajectory_error(&path, &poses).unwrap_or(f64::NAN) * 1e3
         })
         .collect();
     let ratio = errors[0] / errors[1];
     println!(
-        "trajectory `{}`: seed {seed}, path {} mm; {PHYSICS_NOTE}",
+        "trajectory `{}`: seed {seed}, path {} mm; {note}",
         scenario.name,
         path.iter()
             .map(|p| format!("({:.0}, {:.0})", p.x * 1e3, p.y * 1e3))
@@ -405,8 +567,8 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
             "{:<12} {:>14.2} {:>8} {:>10} {:>8} {:>10} {:>8.0} {:>8.1}",
             planner.name(),
             e,
-            r.samples.len(),
-            if r.success { "reached" } else { r.end.name() },
+            judged(r).samples.len(),
+            if r.success() { "reached" } else { r.end.name() },
             r.pushes,
             r.circlings,
             r.sim_time_s,
@@ -416,9 +578,9 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
             planner.name().to_owned(),
             TrajectoryPlannerJson {
                 mean_error_mm: *e,
-                points: r.samples.len(),
-                reached_end: r.success,
-                final_distance_to_end_mm: r.position_error_mm,
+                points: judged(r).samples.len(),
+                reached_end: r.success(),
+                final_distance_to_end_mm: judged(r).position_error_mm,
                 pushes: r.pushes,
                 circlings: r.circlings,
                 sim_time_s: r.sim_time_s,
@@ -435,7 +597,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
                 benchmark: "trajectory",
                 scenario: scenario.name.clone(),
                 seed,
-                physics: "in-process",
+                physics: physics_label(args.in_process),
                 path_mm: path.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect(),
                 planners: json_planners,
                 ratio,
@@ -450,11 +612,11 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
             .zip(&errors)
             .map(|((planner, r), e)| Panel {
                 title: format!("{planner}: mean error {e:.2} mm per point"),
-                samples: &r.samples,
+                samples: &judged(r).samples,
             })
             .collect();
         let title = format!(
-            "trajectory `{}`: path in red, object every few steps ({PHYSICS_NOTE})",
+            "trajectory `{}`: path in red, object every few steps ({note})",
             scenario.name
         );
         plot_runs(
@@ -469,13 +631,13 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
 }
 
 /// One panel of a plot: a run's recorded poses.
-struct Panel<'a> {
-    title: String,
-    samples: &'a [PoseSample],
+pub(crate) struct Panel<'a> {
+    pub title: String,
+    pub samples: &'a [PoseSample],
 }
 
 /// What is drawn under every panel in red.
-enum Overlay<'a> {
+pub(crate) enum Overlay<'a> {
     Goal(Pose2),
     Path(&'a [DVec2]),
 }
@@ -509,7 +671,7 @@ fn plot_error(e: impl std::fmt::Display) -> anyhow::Error {
 
 /// Draws the panels side by side: under each the overlay in red, the centroid's path in
 /// blue and the object's outline every few recorded poses (at most about 40 per panel).
-fn plot_runs(
+pub(crate) fn plot_runs(
     path: &Path,
     title: &str,
     shape: &ObjectShape,

@@ -1,9 +1,13 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
 mod bench_learn;
+mod bench_tasks;
+mod children;
 mod control;
 mod control_plane;
+mod evaluation;
 mod instance_lock;
+mod pipeline_bench;
 mod probe;
 mod profile;
 mod rates;
@@ -147,6 +151,21 @@ enum BenchCmd {
     ///
     /// Example: agp bench learn --scenario triangle --json learn.json
     Learn(bench_learn::BenchLearnArgs),
+    /// Put the object at goals (benchmarks.md section 3): random goals 250 to 500 mm from
+    /// the start, any orientation, each planner on the same goals; success within the
+    /// scenario's tolerance (orientation modulo the object's symmetry), errors, pushes,
+    /// simulated and wall time. Runs over the pipeline: lockstep `agp-physics`,
+    /// `agp-estimator` serving the AG file, one `agp-planner` process per episode; only
+    /// the benchmark (and the `oracle`, which says so) reads ground truth.
+    ///
+    /// Example: agp bench place --scenario lshape --episodes 20 --json place.json --plot place.svg
+    Place(bench_tasks::BenchPlaceArgs),
+    /// Push the object along a line (benchmarks.md section 2): the affordance and the
+    /// baseline planner on the same seed, the mean distance of the recorded centroid
+    /// positions to the path, and their ratio beside the paper's 7.82 / 10.71.
+    ///
+    /// Example: agp bench trajectory --scenario lshape --json trajectory.json --plot trajectory.svg
+    Trajectory(bench_tasks::BenchTrajectoryArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -176,6 +195,12 @@ fn main() -> ExitCode {
         Cmd::Bench {
             what: BenchCmd::Learn(args),
         } => bench_learn::run(args).map(|_| 0),
+        Cmd::Bench {
+            what: BenchCmd::Place(args),
+        } => bench_tasks::run_place(args).map(|_| 0),
+        Cmd::Bench {
+            what: BenchCmd::Trajectory(args),
+        } => bench_tasks::run_trajectory(args).map(|_| 0),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {

@@ -6,15 +6,15 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Stdio};
+use std::time::Duration;
 
 use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2, install_shutdown_handler};
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 
-use crate::up::{signal_group, spawn_guarded};
+use crate::children::{GuardedChild, sibling_executable};
 
 /// Gap (m) between the robot's shell and the object's farthest point at the start.
 const START_GAP: f64 = 0.02;
@@ -269,9 +269,7 @@ fn tempfile_in(dir: &Path, path: &Path) -> Result<(PathBuf, std::fs::File)> {
 }
 
 /// The probe's own lockstep physics process.
-struct PhysicsChild {
-    child: Option<Child>,
-}
+struct PhysicsChild(GuardedChild);
 
 impl PhysicsChild {
     fn start(instance: &str, scenario: &str, seed: Option<u64>) -> Result<Self> {
@@ -285,48 +283,13 @@ impl PhysicsChild {
         if let Some(seed) = seed {
             cmd.args(["--seed", &seed.to_string()]);
         }
-        let child =
-            spawn_guarded(&mut cmd).with_context(|| format!("cannot start {}", exe.display()))?;
-        Ok(Self { child: Some(child) })
+        Ok(Self(GuardedChild::spawn("agp-physics", &mut cmd)?))
     }
 
     /// SIGTERM, a grace period, then SIGKILL; always reaped.
     fn stop(&mut self) -> Result<()> {
-        let Some(mut child) = self.child.take() else {
-            return Ok(());
-        };
-        if child.try_wait()?.is_none() {
-            signal_group(&child, libc::SIGTERM);
-            let deadline = Instant::now() + Duration::from_secs(5);
-            while child.try_wait()?.is_none() && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(5));
-            }
-            if child.try_wait()?.is_none() {
-                signal_group(&child, libc::SIGKILL);
-            }
-        }
-        child.wait().context("cannot reap agp-physics")?;
-        Ok(())
+        self.0.stop(Duration::from_secs(5)).map(|_| ())
     }
-}
-
-impl Drop for PhysicsChild {
-    fn drop(&mut self) {
-        let _ = self.stop();
-    }
-}
-
-/// A binary installed next to the running `agp`.
-fn sibling_executable(name: &str) -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
-    let path = exe.with_file_name(name);
-    if !path.is_file() {
-        bail!(
-            "cannot find `{name}` next to {}: build every binary with `cargo build --release --workspace --bins`",
-            exe.display()
-        );
-    }
-    Ok(path)
 }
 
 /// Exit status of an interrupted probe (128 + SIGINT, as shells report it).

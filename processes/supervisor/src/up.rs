@@ -14,7 +14,10 @@ use anyhow::{Context, Result, anyhow};
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node, ipc};
 
+use agp_world::Scenario;
+
 use crate::control_plane::ControlPlane;
+use crate::evaluation::{self, RunJudge};
 use crate::instance_lock::InstanceLock;
 use crate::signals;
 
@@ -134,6 +137,8 @@ impl Slot<'_> {
 /// happens before any child starts (lock, leftovers, services).
 pub fn up(config: &LaunchConfig) -> Result<u8> {
     signals::install().context("cannot install the signal handlers")?;
+    let scenario = Scenario::resolve(&config.scenario.env_value().to_string_lossy())
+        .with_context(|| format!("cannot load the scenario {}", config.scenario))?;
     let log = Log {
         start: Instant::now(),
     };
@@ -203,8 +208,12 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             exec_override: None,
         })
         .collect();
+    // The judge reads ground truth and the task the planner publishes; it judges the
+    // run once it is over (a run with no task, the scripted drive, gets no verdict).
+    let judge = RunJudge::spawn(&instance, scenario.clone());
     let end = run(config, &mut slots, &node, &mut control, &log);
     control.shutdown(&slots, &log);
+    let verdict = judge.finish();
 
     stop_all(&mut slots, &log);
     node.try_cleanup_dead_nodes();
@@ -234,6 +243,24 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     }
     drop(lock);
 
+    match verdict {
+        Ok(Some(v)) => {
+            match evaluation::report(&v, &scenario, &config.instance, &config.results) {
+                Ok((json, plot)) => {
+                    println!("agp: plot {}, JSON {}", plot.display(), json.display());
+                }
+                Err(e) => eprintln!("agp: error: cannot write the result: {e:#}"),
+            }
+            if v.gaps > 0 {
+                eprintln!(
+                    "agp: note: the judge missed {} ground-truth samples; the plotted path has gaps",
+                    v.gaps
+                );
+            }
+        }
+        Ok(None) => {}
+        Err(e) => eprintln!("agp: error: the judge failed: {e:#}"),
+    }
     match &end {
         RunEnd::Finished { process } => {
             log.note(format_args!("run over: `{process}` finished it"));

@@ -2,6 +2,7 @@
 //! a quick protocol: what a user and the scripts reading the JSON rely on.
 
 #[path = "../src/bench_learn.rs"]
+#[allow(dead_code, reason = "the `agp` binary uses the rest of the module")]
 mod bench_learn;
 
 use std::path::Path;

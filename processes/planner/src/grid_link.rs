@@ -1,0 +1,135 @@
+//! The planner's subscription to the estimator's gradient grids: the affordance gradient rebuilt from the newest complete set.
+
+use std::time::Duration;
+
+use agp_affordance::{AffordanceGradient, GridSetAssembler};
+use agp_shared_types::{DriveError, GradientGrid, Instance, WaitOutcome, WaitStrategy, Waiter};
+use anyhow::{Context, Result, anyhow, bail};
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{Node, ipc};
+
+/// Reads the instance's `grids` topic and rebuilds the estimator's [`AffordanceGradient`]
+/// from the newest complete set of grids (every kind of every alpha of one seq).
+///
+/// Each sample is read in place and released at once: its cells go straight into the
+/// gradient being rebuilt ([`GridSetAssembler`]), so the subscriber never borrows more than
+/// one grid and nothing is copied on the way but the rebuild itself.
+///
+/// A grid of another seq than the set being gathered starts a new set: one publisher sends
+/// in order, so the last seq received is the newest, even from an estimator restarted since
+/// (its seq counts from 1 again). The topic's history hands a late subscriber the last
+/// publications, oldest first, so it ends on the newest set as well.
+pub struct GridLink {
+    subscriber: Subscriber<ipc::Service, GradientGrid, ()>,
+    /// Woken by the estimator once per published set.
+    waiter: Waiter,
+    set: GridSetAssembler,
+    _node: Node<ipc::Service>,
+}
+
+fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
+    move |e| anyhow!("cannot open {what}: {e:?}")
+}
+
+impl GridLink {
+    /// Subscribes to the grids of `instance` (with a node of its own).
+    pub fn open(instance: &Instance) -> Result<Self> {
+        let node = instance
+            .node("planner-grids", false)
+            .map_err(open_err("the grids node"))?;
+        let topic = instance.grids(&node).map_err(open_err("the grids topic"))?;
+        let subscriber = topic
+            .data
+            .subscriber_builder()
+            .create()
+            .map_err(open_err("the grid subscriber"))?;
+        let listener = topic
+            .event
+            .listener_builder()
+            .create()
+            .map_err(open_err("the grid listener"))?;
+        Ok(Self {
+            subscriber,
+            waiter: Waiter::new(listener, WaitStrategy::Block),
+            set: GridSetAssembler::new(),
+            _node: node,
+        })
+    }
+
+    /// Waits up to `timeout` for a complete set of grids and rebuilds from it the gradient
+    /// of `object_name` (the grids do not carry the name). Takes every grid that arrived
+    /// before deciding, so the set is the newest one present; a set a previous call
+    /// returned is not returned again.
+    ///
+    /// Fails on shutdown ([`DriveError::Shutdown`]), at the deadline, or when a grid is
+    /// refused (the set under way is then dropped).
+    pub fn wait_gradient(
+        &mut self,
+        object_name: &str,
+        timeout: Duration,
+    ) -> Result<AffordanceGradient> {
+        let Self {
+            subscriber,
+            waiter,
+            set,
+            ..
+        } = self;
+        let outcome = waiter.wait_for(timeout, || match drain(subscriber, set) {
+            Ok(()) => set.is_complete().then_some(Ok(())),
+            Err(e) => Some(Err(e)),
+        });
+        match outcome {
+            WaitOutcome::Ready(r) => r?,
+            WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
+            WaitOutcome::TimedOut => {
+                let progress = match (set.seq(), set.expected_grid_count()) {
+                    (Some(seq), Some(expected)) => {
+                        format!("{} of the {expected} grids of seq {seq}", set.grid_count())
+                    }
+                    _ => "no grid".to_owned(),
+                };
+                bail!(
+                    "no complete set of gradient grids within {timeout:?} ({progress} arrived): is `agp-estimator` running on this instance, and has it learned or loaded the gradients?"
+                );
+            }
+        }
+        let seq = set.seq().unwrap_or_default();
+        set.finish(object_name)
+            .with_context(|| format!("cannot rebuild the gradient from the grids of seq {seq}"))
+    }
+
+    /// Whether a complete set arrived since the last [`GridLink::wait_gradient`] (the
+    /// estimator published its gradients again): the next call returns it at once. Never
+    /// blocks.
+    #[allow(
+        dead_code,
+        reason = "for a planner that follows republished gradients; none does yet"
+    )]
+    pub fn newer_available(&mut self) -> Result<bool> {
+        drain(&self.subscriber, &mut self.set)?;
+        Ok(self.set.is_complete())
+    }
+}
+
+/// Feeds every grid that arrived into `set`, each read in place and released at once; a
+/// grid of another seq drops the set under way and starts its own.
+fn drain(
+    subscriber: &Subscriber<ipc::Service, GradientGrid, ()>,
+    set: &mut GridSetAssembler,
+) -> Result<()> {
+    while let Some(sample) = subscriber
+        .receive()
+        .map_err(|e| anyhow!("cannot receive a grid: {e:?}"))?
+    {
+        let grid: &GradientGrid = &sample;
+        let seq = grid.header.seq;
+        if set.seq().is_some_and(|s| s != seq) {
+            set.clear();
+        }
+        if let Err(e) = set.add(grid) {
+            set.clear();
+            return Err(e).with_context(|| format!("a grid of seq {seq} was refused"));
+        }
+    }
+    Ok(())
+}

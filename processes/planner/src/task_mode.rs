@@ -1,0 +1,321 @@
+//! `--mode place` and `--mode trajectory`: the paper's Algorithm 5 over the pipeline.
+//!
+//! The planner drives lockstep physics through [`LockstepDriver`] and runs one episode of
+//! [`agp_planner::drive_episode`] from wherever the robot and the object are: it finds the
+//! object, estimates its pose by circling it (IR and odometry only), plans each push on the
+//! affordance gradient, pushes, carries the estimate on with the gradient's prediction and
+//! circles again when the estimate has drifted. The gradient comes from the estimator's
+//! `grids` topic, rebuilt from the published grids (the estimator learned it, or loaded an
+//! AG file); the task goes out on the latched `task` topic, for the evaluation. Only the
+//! `oracle` reads ground truth, and says so.
+//!
+//! A hot-swapped planner (epoch > 0) takes the world as it finds it: it finds the object
+//! again and pushes on towards the same goal.
+
+use std::time::Duration;
+
+use agp_affordance::AffordanceGradient;
+use agp_planner::{
+    EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
+    trajectory_path,
+};
+use agp_shared_types::{
+    DriveError, Instance, LockstepDriver, MAX_PATH_POINTS, Pose2, TaskKind, stage,
+};
+use agp_world::{Pose, RobotDescription, Scenario};
+use anyhow::{Context, Result, anyhow, bail};
+use glam::DVec2;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::{Node, ipc};
+
+use crate::SwapIn;
+use crate::grid_link::GridLink;
+
+/// What `--mode place` and `--mode trajectory` were asked to do.
+#[derive(Debug, Clone)]
+pub struct TaskSettings {
+    pub planner: PlannerKind,
+    pub task: Task,
+    pub epoch: u64,
+    /// Safety net of every wait on another process.
+    pub timeout: Duration,
+    /// How long the estimator may take to publish the gradients (it may be learning).
+    pub gradient_timeout: Duration,
+    /// Print every estimate and push.
+    pub trace: bool,
+}
+
+/// The robot through lockstep physics: one command per physics step.
+struct PipelineWorld {
+    driver: LockstepDriver,
+    /// Ground truth is read only for the oracle.
+    oracle: bool,
+    swap_in: Option<SwapIn>,
+}
+
+fn pose(p: Pose2) -> Pose {
+    Pose::new(p.x, p.y, p.theta)
+}
+
+impl World for PipelineWorld {
+    fn senses(&self) -> Senses {
+        let f = self.driver.frame();
+        Senses {
+            ir_raw: f.ir_raw,
+            ir_sample: f.ir_sample,
+            odometry: pose(f.odometry),
+            fix: pose(f.fix),
+            fix_seq: f.fix_seq,
+        }
+    }
+
+    fn sim_time(&self) -> f64 {
+        self.driver.frame().sim_time_s
+    }
+
+    fn step_count(&self) -> u64 {
+        self.driver.frame().step
+    }
+
+    fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), WorldStepError> {
+        let next = self.driver.step(left_mps, right_mps).map_err(|e| match e {
+            DriveError::Shutdown => WorldStepError::Shutdown,
+            DriveError::PhysicsRestarted => WorldStepError::Restarted,
+            e => WorldStepError::Link(e.to_string()),
+        })?;
+        if let Some(s) = self.swap_in.take() {
+            let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
+            s.driving(applied)
+                .map_err(|e| WorldStepError::Link(format!("{e:#}")))?;
+        }
+        Ok(())
+    }
+
+    fn object_truth(&self) -> Option<Pose> {
+        self.oracle.then(|| pose(self.driver.truth().object))
+    }
+}
+
+/// The task of `scenario` as `--mode` names it, with `--goal` in place of the scenario's.
+pub fn task_of(scenario: &Scenario, kind: TaskKind, goal: Option<Pose2>) -> Task {
+    match kind {
+        TaskKind::Trajectory => Task::Trajectory {
+            path: trajectory_path(scenario),
+        },
+        _ => {
+            let g = scenario.task.goal;
+            Task::Place {
+                goal: goal.unwrap_or(Pose2::new(g.x, g.y, g.theta)),
+            }
+        }
+    }
+}
+
+/// Runs one episode; returns when it ended (or on shutdown, with `Ok(None)`).
+pub fn run(
+    instance: &Instance,
+    scenario: &Scenario,
+    settings: &TaskSettings,
+) -> Result<Option<EpisodeResult>> {
+    if let Task::Trajectory { path } = &settings.task
+        && path.len() > MAX_PATH_POINTS
+    {
+        bail!(
+            "the trajectory has {} points; at most {MAX_PATH_POINTS} fit the task message",
+            path.len()
+        );
+    }
+    let robot = RobotDescription::epuck();
+    let gradient = if settings.planner.needs_gradient() {
+        let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
+        match link.wait_gradient(&scenario.name, settings.gradient_timeout) {
+            Ok(g) => Some(g),
+            Err(e) if agp_shared_types::shutdown_requested() => {
+                let _ = e;
+                return Ok(None);
+            }
+            Err(e) => return Err(e).context("no affordance gradient from the estimator"),
+        }
+    } else {
+        None
+    };
+    if let Some(g) = &gradient {
+        describe(g);
+    }
+    let mut driver = match LockstepDriver::connect(
+        instance,
+        "planner",
+        settings.epoch,
+        settings.planner.reads_ground_truth(),
+        settings.timeout,
+    ) {
+        Ok(d) => d,
+        Err(DriveError::Shutdown) => return Ok(None),
+        Err(e) => return Err(e).context("cannot reach physics"),
+    };
+    let _task = publish_task(instance, scenario, &settings.task)?;
+    let swap_in = match SwapIn::start(instance, &mut driver) {
+        Ok(s) => s,
+        Err(e) if agp_shared_types::shutdown_requested() => {
+            let _ = e;
+            return Ok(None);
+        }
+        Err(e) => return Err(e),
+    };
+    let mut world = PipelineWorld {
+        driver,
+        oracle: settings.planner.reads_ground_truth(),
+        swap_in,
+    };
+    let config = EpisodeConfig {
+        trace: settings.trace,
+        ..EpisodeConfig::for_scenario(scenario)
+    };
+    println!(
+        "planner `{}`{}: {} of `{}`",
+        settings.planner,
+        if settings.planner.reads_ground_truth() {
+            " (reads the object's true pose: an upper bound, not a result)"
+        } else {
+            ""
+        },
+        describe_task(&settings.task),
+        scenario.name
+    );
+    loop {
+        let outcome = drive_episode(
+            &mut world,
+            scenario,
+            &robot,
+            gradient.as_ref(),
+            settings.planner,
+            &settings.task,
+            &config,
+        );
+        match outcome {
+            Ok(r) => {
+                println!(
+                    "planner `{}`: {} after {} pushes and {} circlings, {:.1} s simulated, {:.2} s wall{}",
+                    r.planner,
+                    r.end.name(),
+                    r.pushes,
+                    r.circlings,
+                    r.sim_time_s,
+                    r.wall_time_s,
+                    r.final_estimate.map_or(String::new(), |p| format!(
+                        "; the object estimated at ({:.1}, {:.1}) mm, {:.1} deg",
+                        p.x * 1e3,
+                        p.y * 1e3,
+                        p.theta.to_degrees()
+                    ))
+                );
+                return Ok(Some(r));
+            }
+            Err(agp_planner::EpisodeRunError::World(WorldStepError::Shutdown)) => return Ok(None),
+            Err(agp_planner::EpisodeRunError::World(WorldStepError::Restarted)) => {
+                // A new world from the scenario's start: the episode starts over, finding
+                // the object first.
+                println!("planner: physics restarted: the episode starts over");
+            }
+            Err(e) => return Err(anyhow!(e)),
+        }
+    }
+}
+
+fn describe(g: &AffordanceGradient) {
+    let alphas: Vec<String> = g.alphas_deg().map(|a| format!("{a:+.0}")).collect();
+    println!(
+        "planner: affordance gradient of `{}` from the estimator's grids: alphas {} deg, {} pushes",
+        g.object_name(),
+        alphas.join(", "),
+        g.alphas_deg().filter_map(|a| g.push_count(a)).sum::<u64>()
+    );
+}
+
+fn describe_task(task: &Task) -> String {
+    match task {
+        Task::Place { goal } => format!(
+            "place at ({:.0}, {:.0}) mm, {:.0} deg",
+            goal.x * 1e3,
+            goal.y * 1e3,
+            goal.theta.to_degrees()
+        ),
+        Task::Trajectory { path } => format!("push along a {}-point path", path.len()),
+    }
+}
+
+/// The task as published: the publisher's history hands it to late readers while it lives.
+struct TaskPublication {
+    _publisher: Publisher<ipc::Service, agp_shared_types::Task, ()>,
+    _node: Node<ipc::Service>,
+}
+
+/// Publishes the task on the instance's latched `task` topic: what the evaluation judges.
+fn publish_task(instance: &Instance, scenario: &Scenario, task: &Task) -> Result<TaskPublication> {
+    let node = instance
+        .node("planner-task", false)
+        .map_err(|e| anyhow!("cannot create the task node: {e:?}"))?;
+    let topic = instance
+        .task(&node)
+        .map_err(|e| anyhow!("cannot open the task topic: {e:?}"))?;
+    let publisher = topic
+        .data
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow!("cannot publish the task: {e:?}"))?;
+    let t = &scenario.task;
+    let mut msg = agp_shared_types::Task {
+        kind: TaskKind::Place as u32,
+        path_len: 0,
+        goal: Pose2::default(),
+        tolerance_m: t.tolerance_m,
+        tolerance_rad: t.tolerance_rad,
+        path: [[0.0; 2]; MAX_PATH_POINTS],
+        max_pushes: t.max_pushes,
+        _pad: 0,
+        seed: t.seed,
+    };
+    match task {
+        Task::Place { goal } => msg.goal = *goal,
+        Task::Trajectory { path } => {
+            msg.kind = TaskKind::Trajectory as u32;
+            msg.path_len = path.len() as u32;
+            for (slot, p) in msg.path.iter_mut().zip(path.iter().copied()) {
+                *slot = DVec2::to_array(&p);
+            }
+        }
+    }
+    let sample = publisher
+        .loan_uninit()
+        .map_err(|e| anyhow!("cannot loan the task sample: {e:?}"))?;
+    sample
+        .write_payload(msg)
+        .send()
+        .map_err(|e| anyhow!("cannot send the task: {e:?}"))?;
+    Ok(TaskPublication {
+        _publisher: publisher,
+        _node: node,
+    })
+}
+
+/// Writes the planner's account of `r` (no ground truth in it) as one JSON object.
+pub fn write_report(path: &std::path::Path, r: &EpisodeResult) -> Result<()> {
+    let estimate = r.final_estimate.map(|p| {
+        serde_json::json!({
+            "x_mm": p.x * 1e3,
+            "y_mm": p.y * 1e3,
+            "theta_deg": p.theta.to_degrees(),
+        })
+    });
+    let v = serde_json::json!({
+        "planner": r.planner.name(),
+        "end": r.end.name(),
+        "pushes": r.pushes,
+        "circlings": r.circlings,
+        "sim_time_s": r.sim_time_s,
+        "wall_time_s": r.wall_time_s,
+        "final_estimate": estimate,
+    });
+    std::fs::write(path, format!("{v}\n"))
+        .with_context(|| format!("cannot write the report {}", path.display()))
+}
