@@ -436,6 +436,7 @@ pub fn drive_episode<W: World>(
             }
         }
     };
+    let start_s = world.sim_time();
     let mut run = Run {
         localizer: RobotLocalizer::new(config.fix_gain),
         sense: ContactSense::new(robot),
@@ -444,9 +445,9 @@ pub fn drive_episode<W: World>(
         world,
         samples: Vec::new(),
         recording: false,
+        start_s,
     };
     run.record();
-    let t0 = run.world.sim_time();
     let mut episode = Episode {
         run,
         brain,
@@ -478,7 +479,7 @@ pub fn drive_episode<W: World>(
         end,
         pushes,
         circlings,
-        sim_time_s: run.world.sim_time() - t0,
+        sim_time_s: run.elapsed(),
         wall_time_s: wall.elapsed().as_secs_f64(),
         final_estimate: last_estimate,
         evaluation,
@@ -1029,6 +1030,8 @@ struct Run<'a, W: World> {
     config: &'a EpisodeConfig,
     samples: Vec<PoseSample>,
     recording: bool,
+    /// Simulated time at the episode's start, s.
+    start_s: f64,
 }
 
 impl<W: World> Run<'_, W> {
@@ -1040,7 +1043,7 @@ impl<W: World> Run<'_, W> {
 
     /// Simulated time since the episode began, s.
     fn elapsed(&self) -> f64 {
-        self.world.sim_time() - self.samples.first().map_or(0.0, |s| s.t_s)
+        self.world.sim_time() - self.start_s
     }
 
     /// Records the object's true pose, where the world offers it (evaluation only).

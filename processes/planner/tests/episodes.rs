@@ -9,9 +9,10 @@
 mod common;
 
 use agp_affordance::AffordanceGradient;
+use agp_physics::{Sim, SimConfig};
 use agp_planner::{
-    EpisodeConfig, EpisodeEnd, PlannerKind, Task, place_goals, run_episode, trajectory_error,
-    trajectory_path,
+    EpisodeConfig, EpisodeEnd, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
+    place_goals, run_episode, trajectory_error, trajectory_path,
 };
 use agp_shared_types::Pose2;
 use agp_world::{RobotDescription, Scenario};
@@ -176,4 +177,58 @@ fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does
         errors[0] * 1e3,
         errors[1] * 1e3
     );
+}
+
+#[test]
+fn an_episodes_time_limit_counts_from_its_own_start_not_from_the_worlds() {
+    // Regression: the limit was checked against the world's clock, so a world that had
+    // run for longer than the limit (one physics process serving many episodes) and that
+    // offers no ground truth (the pipeline) ended every later episode at once.
+    let scenario = Scenario::builtin("triangle").expect("built-in");
+    let robot = RobotDescription::epuck();
+    let config = EpisodeConfig {
+        max_pushes: 1,
+        max_sim_time_s: 60.0,
+        ..EpisodeConfig::for_scenario(&scenario)
+    };
+    let mut sim = Sim::new(&scenario, &robot, SimConfig::default()).expect("sim");
+    while sim.sim_time() < 2.0 * config.max_sim_time_s {
+        sim.step(0.0, 0.0);
+    }
+    let mut world = WithoutTruth(sim);
+    let r = drive_episode(
+        &mut world,
+        &scenario,
+        &robot,
+        None,
+        PlannerKind::Baseline,
+        &Task::Place {
+            goal: Pose2::new(0.3, 0.0, 0.0),
+        },
+        &config,
+    )
+    .expect("the episode runs");
+    assert_eq!(r.end, EpisodeEnd::MaxPushes, "{r:?}");
+    assert!(r.sim_time_s < config.max_sim_time_s, "{} s", r.sim_time_s);
+}
+
+/// The in-process physics as the pipeline's planner sees it: no ground truth.
+struct WithoutTruth(Sim);
+
+impl World for WithoutTruth {
+    fn senses(&self) -> Senses {
+        World::senses(&self.0)
+    }
+    fn sim_time(&self) -> f64 {
+        World::sim_time(&self.0)
+    }
+    fn step_count(&self) -> u64 {
+        World::step_count(&self.0)
+    }
+    fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), WorldStepError> {
+        World::step(&mut self.0, left_mps, right_mps)
+    }
+    fn object_truth(&self) -> Option<agp_world::Pose> {
+        None
+    }
 }
