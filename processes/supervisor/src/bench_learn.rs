@@ -73,10 +73,10 @@ pub struct BenchLearnArgs {
 pub const DEFAULT_OUT: &str = "results/learn";
 
 impl BenchLearnArgs {
-    /// The benchmark's protocol for one object, its files in `out`.
-    pub fn for_scenario(scenario: &str, out: PathBuf) -> Self {
+    /// The benchmark's protocol for `scenarios`, their files in `out`.
+    pub fn for_scenarios(scenarios: &[&str], out: PathBuf) -> Self {
         Self {
-            scenarios: vec![scenario.to_owned()],
+            scenarios: scenarios.iter().map(|s| (*s).to_owned()).collect(),
             seed: 7,
             alphas: PAPER_ALPHAS_DEG.to_vec(),
             eval: MIN_EVAL_PUSHES,
@@ -123,6 +123,11 @@ impl Human {
 /// Runs `agp bench learn`. A missed target is reported, not an error: the exit code is
 /// success once every object was learned and every file written.
 pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
+    learn(args).map(|_| ExitCode::SUCCESS)
+}
+
+/// Runs the learning benchmark; its JSON document (written to `--json` if given).
+pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     let wall = Instant::now();
     let cfg = config(args)?;
     let jobs = resolve_jobs(&args.scenarios)?;
@@ -214,8 +219,7 @@ pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
         }
     }
     human.say(&format!("wall time {wall_time_s:.1} s"));
-    if let Some(path) = &args.json {
-        let doc = json!({
+    let doc = json!({
             "benchmark": "learn",
             "seed": cfg.seed,
             "physics": "in-process",
@@ -227,7 +231,8 @@ pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
             "objects": objects,
             "targets_missed": missed,
             "wall_time_s": wall_time_s,
-        });
+    });
+    if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&doc).context("cannot encode the JSON")?;
         if json_to_stdout {
             let mut out = std::io::stdout().lock();
@@ -239,7 +244,7 @@ pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
             human.say(&format!("JSON     {}", path.display()));
         }
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(doc)
 }
 
 /// The scenarios, all loaded and checked before anything runs.

@@ -9,7 +9,6 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::Instant;
 
 use agp_affordance::AffordanceGradient;
@@ -188,8 +187,8 @@ pub fn resolve_ag(
             scenario.name,
             learned.display()
         );
-        bench_learn::run(&bench_learn::BenchLearnArgs::for_scenario(
-            scenario_arg,
+        bench_learn::run(&bench_learn::BenchLearnArgs::for_scenarios(
+            &[scenario_arg],
             out,
         ))?;
     }
@@ -319,7 +318,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
 }
 
 /// Runs `agp bench place`.
-pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
+pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
     let wall = Instant::now();
     if args.episodes == 0 {
         bail!("`--episodes` must be at least 1");
@@ -445,20 +444,20 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
         println!("(GT) {ORACLE_NOTE}");
     }
     println!("wall time {wall_time_s:.1} s");
+    let doc = serde_json::to_value(PlaceJson {
+        benchmark: "place",
+        scenario: scenario.name.clone(),
+        seed,
+        physics: physics_label(args.in_process),
+        tolerance_mm: base.tolerance_m * 1e3,
+        tolerance_deg: base.tolerance_rad.to_degrees(),
+        planners: json_planners,
+        wall_time_s,
+    })
+    .context("cannot encode the result")?;
     if let Some(path) = &args.json {
-        write_json(
-            path,
-            &PlaceJson {
-                benchmark: "place",
-                scenario: scenario.name.clone(),
-                seed,
-                physics: physics_label(args.in_process),
-                tolerance_mm: base.tolerance_m * 1e3,
-                tolerance_deg: base.tolerance_rad.to_degrees(),
-                planners: json_planners,
-                wall_time_s,
-            },
-        )?;
+        write_json(path, &doc)?;
+        println!("JSON     {}", path.display());
     }
     if let Some(path) = &args.plot {
         let panels: Vec<Panel> = results
@@ -495,13 +494,14 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<ExitCode> {
             &panels,
             Overlay::Goal(goal),
         )?;
+        println!("plot     {}", path.display());
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(doc)
 }
 
 /// Runs `agp bench trajectory`: the affordance and the baseline planner on the same
 /// seed.
-pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
+pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
     let wall = Instant::now();
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
@@ -590,20 +590,20 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
     }
     println!("ratio affordance / baseline {ratio:.2} (paper 7.82 / 10.71 = 0.73)");
     println!("wall time {wall_time_s:.1} s");
+    let doc = serde_json::to_value(TrajectoryJson {
+        benchmark: "trajectory",
+        scenario: scenario.name.clone(),
+        seed,
+        physics: physics_label(args.in_process),
+        path_mm: path.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect(),
+        planners: json_planners,
+        ratio,
+        wall_time_s,
+    })
+    .context("cannot encode the result")?;
     if let Some(file) = &args.json {
-        write_json(
-            file,
-            &TrajectoryJson {
-                benchmark: "trajectory",
-                scenario: scenario.name.clone(),
-                seed,
-                physics: physics_label(args.in_process),
-                path_mm: path.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect(),
-                planners: json_planners,
-                ratio,
-                wall_time_s,
-            },
-        )?;
+        write_json(file, &doc)?;
+        println!("JSON     {}", file.display());
     }
     if let Some(file) = &args.plot {
         let panels: Vec<Panel> = planners
@@ -626,8 +626,9 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<ExitCode> {
             &panels,
             Overlay::Path(&path),
         )?;
+        println!("plot     {}", file.display());
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(doc)
 }
 
 /// One panel of a plot: a run's recorded poses.

@@ -1,6 +1,7 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
 mod bench_learn;
+mod bench_paper;
 mod bench_tasks;
 mod children;
 mod control;
@@ -166,6 +167,13 @@ enum BenchCmd {
     ///
     /// Example: agp bench trajectory --scenario lshape --json trajectory.json --plot trajectory.svg
     Trajectory(bench_tasks::BenchTrajectoryArgs),
+    /// All three benchmarks on the paper's objects (learning: triangle, square, lshape,
+    /// circle; trajectory: lshape; placement: triangle and lshape with every planner), then
+    /// our figures beside the paper's and the project's targets, met or missed. Everything
+    /// goes to `--out` (default `results/paper`).
+    ///
+    /// Example: agp bench paper --json paper.json
+    Paper(bench_paper::BenchPaperArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -201,6 +209,9 @@ fn main() -> ExitCode {
         Cmd::Bench {
             what: BenchCmd::Trajectory(args),
         } => bench_tasks::run_trajectory(args).map(|_| 0),
+        Cmd::Bench {
+            what: BenchCmd::Paper(args),
+        } => bench_paper::run(args).map(|_| 0),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {
