@@ -7,7 +7,7 @@ use iceoryx2::prelude::{Node, ipc};
 
 use crate::control::ActiveEpoch;
 use crate::instance::Instance;
-use crate::payloads::{GroundTruth, IrFrame, MotorCommand, Pose2, Reset};
+use crate::payloads::{GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset};
 use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
 use crate::{monotonic_ns, stage};
 
@@ -33,8 +33,9 @@ pub enum DriveError {
 }
 
 /// Drives a lockstep physics process directly: sends a motor command for the current step,
-/// waits for the next frame. Used by the probe, the scripted drive and tests; the pipeline's
-/// planner goes through the estimator instead.
+/// waits for the next frame. Used by the probe, the planner's modes and tests. A planner that
+/// acts on the estimator's estimate of a frame rather than on the frame itself says so with
+/// [`LockstepDriver::note_estimate`], so its command's timing covers the estimator's hops.
 ///
 /// With `ground_truth`, it also reads the true poses: that makes it an evaluation tool, which
 /// no estimator or planner may be.
@@ -186,6 +187,24 @@ impl LockstepDriver {
         &self.frame
     }
 
+    /// Notes that the planner acts on the estimator's `estimate` of the latest frame, which
+    /// it received at `received_ns` (CLOCK_MONOTONIC): the next command then carries the
+    /// estimator's stamps (ESTIMATOR_RECEIVED, ESTIMATE_PUBLISHED) and, as PLANNER_RECEIVED,
+    /// the estimate's receipt instead of the frame's. An estimate of another frame (another
+    /// trace or publish stamp) changes nothing; returns whether it was noted.
+    pub fn note_estimate(&mut self, estimate: &ObjectEstimate, received_ns: u64) -> bool {
+        let (e, f) = (&estimate.timing, &mut self.frame.timing);
+        if e.trace_id != f.trace_id
+            || e.stamps_ns[stage::FRAME_PUBLISHED] != f.stamps_ns[stage::FRAME_PUBLISHED]
+        {
+            return false;
+        }
+        f.stamps_ns[stage::ESTIMATOR_RECEIVED] = e.stamps_ns[stage::ESTIMATOR_RECEIVED];
+        f.stamps_ns[stage::ESTIMATE_PUBLISHED] = e.stamps_ns[stage::ESTIMATE_PUBLISHED];
+        f.stamps_ns[stage::PLANNER_RECEIVED] = received_ns;
+        true
+    }
+
     /// The ground truth of the latest frame's step (only when connected with ground truth).
     pub fn truth(&self) -> &GroundTruth {
         &self.last_truth
@@ -257,9 +276,9 @@ impl LockstepDriver {
             right_mps,
             ..MotorCommand::default()
         };
-        // The frame's trace and its stamps up to the planner's receive; the stages after
-        // it belong to this command (the frame's own COMMAND_* stamps are the previous
-        // command's).
+        // The frame's trace and its stamps up to the planner's receive (with the
+        // estimator's, if `note_estimate` added them); the stages after it belong to this
+        // command (the frame's own COMMAND_* stamps are the previous command's).
         cmd.timing.trace_id = self.frame.timing.trace_id;
         cmd.timing.stamps_ns[..=stage::PLANNER_RECEIVED]
             .copy_from_slice(&self.frame.timing.stamps_ns[..=stage::PLANNER_RECEIVED]);

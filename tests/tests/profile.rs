@@ -1,12 +1,13 @@
-//! `agp profile` on a running lockstep instance of real physics and the scripted planner:
-//! every promised figure is there and ordered, the floor ran, and nothing is left behind.
+//! `agp profile` on a running lockstep instance of real physics and the scripted planner,
+//! and of a learning run with the estimator in the loop: every promised figure is there and
+//! ordered, the floor ran, and nothing is left behind.
 
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{Instance, LockstepDriver, Pose2, stage};
-use agp_tests::{LaunchDir, bin_path, count_instance_files, run_agp};
+use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, run_agp};
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -19,6 +20,19 @@ fn launch(instance: &str) -> String {
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
          [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
          args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         ends_run = true\n"
+    )
+}
+
+/// The learning phase over physics, the estimator and the planner, with more trials than
+/// the test lasts.
+fn learn_launch(instance: &str) -> String {
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
+         args = [\"--mode\", \"learn\", \"--trials-per-alpha\", \"60\"]\n\
          ends_run = true\n"
     )
 }
@@ -173,6 +187,111 @@ fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_
 
     let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
     assert!(down.status.success(), "{}", down.stderr);
+    drop(guard);
+    assert_eq!(count_instance_files(name), 0, "files of `{name}` are left");
+}
+
+#[test]
+fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_no_file() {
+    let name = "t-profile-learn";
+    let dir = LaunchDir::new(&learn_launch(name));
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    let guard = Down {
+        dir: dir.path(),
+        name,
+    };
+    // The planner says so once the estimator acknowledged the first frame: from then on
+    // every step goes through the three processes.
+    up.wait_for_lines("learning `triangle`", 1, TIMEOUT);
+
+    let profile = run_agp(
+        dir.path(),
+        &[
+            "profile",
+            "--instance",
+            name,
+            "--seconds",
+            "1",
+            "--json",
+            "out.json",
+            "--plot",
+            "out.svg",
+        ],
+        TIMEOUT,
+    );
+    assert!(
+        profile.status.success(),
+        "agp profile failed: {}{}",
+        profile.stdout,
+        profile.stderr
+    );
+    let text = std::fs::read_to_string(dir.path().join("out.json")).expect("out.json written");
+    let v: Value = serde_json::from_str(&text).expect("out.json is JSON");
+
+    // The estimator's hops, and no physics->planner: the planner acts on the estimate.
+    let hops = v["hops"].as_array().expect("`hops` is a list");
+    let hop_names: Vec<&str> = hops.iter().filter_map(|h| h["name"].as_str()).collect();
+    assert_eq!(
+        hop_names,
+        [
+            "physics->estimator",
+            "estimator->planner",
+            "planner->physics"
+        ]
+    );
+    for row in hops {
+        assert!(
+            row["samples"].as_u64().is_some_and(|n| n > 0),
+            "hop without samples: {row}"
+        );
+    }
+    let hop_p50: Vec<u64> = hops.iter().map(|h| assert_row(h, "hop")).collect();
+    let stages = v["stages"].as_array().expect("`stages` is a list");
+    let stage_names: Vec<&str> = stages.iter().filter_map(|h| h["name"].as_str()).collect();
+    assert_eq!(
+        stage_names,
+        ["estimator", "planner", "physics.step", "physics.publish"]
+    );
+    for s in stages {
+        assert_row(s, "stage");
+    }
+    let end_to_end = assert_row(&v["end_to_end"], "end_to_end");
+    assert_row(&v["floor"], "floor");
+    for (hop, p50) in hop_names.iter().zip(&hop_p50) {
+        assert!(
+            end_to_end >= *p50,
+            "end to end p50 {end_to_end} ns is below hop `{hop}`'s p50 {p50} ns"
+        );
+    }
+    assert!(
+        v["waiting"].as_str().is_some_and(|w| !w.is_empty()),
+        "no waiting strategy in {v}"
+    );
+    let svg = std::fs::read_to_string(dir.path().join("out.svg")).expect("out.svg written");
+    for series in [
+        "physics-&gt;estimator",
+        "estimator-&gt;planner",
+        "planner-&gt;physics",
+    ] {
+        assert!(svg.contains(series), "the plot has no series `{series}`");
+    }
+    assert!(
+        !svg.contains("physics-&gt;planner"),
+        "the plot has a series no step passed"
+    );
+    assert_eq!(count_instance_files(&format!("pfloor-{}", profile.pid)), 0);
+
+    // Stop the learning run before its end; the supervisor then removes the instance.
+    let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    let run = up.wait(TIMEOUT);
+    assert!(
+        down.status.success(),
+        "agp down: {}{}\nrun: {}{}",
+        down.stdout,
+        down.stderr,
+        run.stdout,
+        run.stderr
+    );
     drop(guard);
     assert_eq!(count_instance_files(name), 0, "files of `{name}` are left");
 }

@@ -25,7 +25,7 @@ use agp_planner::{
 };
 use agp_shared_types::{
     DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport, LearnReportKind,
-    LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter, stage,
+    LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};
@@ -166,23 +166,30 @@ impl EstimatorLink {
         })
     }
 
-    /// Waits until the estimator has seen `frame` (or a later one).
-    fn ack(&mut self, frame: &IrFrame) -> Result<()> {
+    /// Waits until the estimator has seen `frame` (or a later one). Returns the estimator's
+    /// estimate of `frame` itself and when it was received (CLOCK_MONOTONIC), if this wait
+    /// took it: the command answering `frame` carries its stamps.
+    fn ack(&mut self, frame: &IrFrame) -> Result<Option<(ObjectEstimate, u64)>> {
         let stamp = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
         if self.acked_stamp >= stamp {
-            return Ok(());
+            return Ok(None);
         }
         let estimates = &self.estimates;
         let mut acked = self.acked_stamp;
+        let mut own = None;
         let outcome = self.estimates_waiter.wait_for(self.timeout, || {
             while let Ok(Some(e)) = estimates.receive() {
-                acked = acked.max(e.timing.stamps_ns[stage::FRAME_PUBLISHED]);
+                let published = e.timing.stamps_ns[stage::FRAME_PUBLISHED];
+                if published == stamp {
+                    own = Some((*e, monotonic_ns()));
+                }
+                acked = acked.max(published);
             }
             (acked >= stamp).then_some(())
         });
         self.acked_stamp = acked;
         match outcome {
-            WaitOutcome::Ready(()) => Ok(()),
+            WaitOutcome::Ready(()) => Ok(own),
             WaitOutcome::Shutdown => Err(DriveError::Shutdown.into()),
             WaitOutcome::TimedOut => bail!(
                 "the estimator did not acknowledge the frame of step {} within {:?}: is `agp-estimator` running on this instance?",
@@ -301,14 +308,23 @@ impl Learner<'_> {
 
     fn step(&mut self, l: f64, r: f64) -> Result<IrFrame> {
         let f = *self.driver.step(l, r)?;
-        self.link.ack(&f)?;
+        self.ack(&f)?;
         Ok(f)
     }
 
     fn reset(&mut self, robot: Pose2) -> Result<IrFrame> {
         let f = *self.driver.reset(self.object0, robot)?;
-        self.link.ack(&f)?;
+        self.ack(&f)?;
         Ok(f)
+    }
+
+    /// Waits for the estimator's acknowledgement of `f`, the driver's latest frame; the
+    /// command answering it then carries the estimator's stamps and the estimate's receipt.
+    fn ack(&mut self, f: &IrFrame) -> Result<()> {
+        if let Some((estimate, received_ns)) = self.link.ack(f)? {
+            self.driver.note_estimate(&estimate, received_ns);
+        }
+        Ok(())
     }
 
     fn event(&self, kind: LearnEventKind) -> LearnEvent {
@@ -462,10 +478,7 @@ fn learn(learner: &mut Learner<'_>, scenario: &Scenario) -> Result<()> {
     let settings = learner.settings;
     let wall = std::time::Instant::now();
     let first = learner.frame();
-    learner
-        .link
-        .ack(&first)
-        .context("waiting for the estimator")?;
+    learner.ack(&first).context("waiting for the estimator")?;
     println!(
         "learning `{}`: {} trials per alpha at alphas {:?} deg, push {} ms",
         scenario.name,

@@ -6,6 +6,12 @@
 //! planner received it, published the command, physics received and applied it. So one
 //! frame is one complete control step, and the profiler needs no other topic.
 //!
+//! A step goes physics -> planner -> physics, or, while the estimator is in the lockstep
+//! loop (the learning phase: the planner acts on a frame once it has the estimator's
+//! estimate of it), physics -> estimator -> planner -> physics: then the command carries the
+//! estimator's stamps and PLANNER_RECEIVED is the estimate's receipt. Each step is measured
+//! along its own route; a hop or stage no sampled step passed is left out of the report.
+//!
 //! It samples instead of following every frame: about every millisecond it wakes, takes
 //! what its subscriber's buffer holds (the latest few frames; older ones were overwritten)
 //! and sleeps again. It never spins, so on two cores it leaves the pipeline its cores, and
@@ -105,6 +111,51 @@ impl Stamp {
     }
 }
 
+/// Which control steps a row measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    /// Every step.
+    Any,
+    /// Steps through the estimator: physics -> estimator -> planner -> physics.
+    Estimator,
+    /// Steps straight from physics to the planner.
+    Direct,
+}
+
+impl Route {
+    /// The route of the step that made `f`: through the estimator if its command carries
+    /// the estimator's receipt.
+    fn of(f: &IrFrame) -> Self {
+        if f.cause.stamps_ns[stage::ESTIMATOR_RECEIVED] != 0 {
+            Self::Estimator
+        } else {
+            Self::Direct
+        }
+    }
+
+    fn takes(self, f: &IrFrame) -> bool {
+        self == Self::Any || self == Self::of(f)
+    }
+
+    fn path(self) -> &'static str {
+        match self {
+            Self::Any => "any",
+            Self::Estimator => "physics -> estimator -> planner -> physics",
+            Self::Direct => "physics -> planner -> physics",
+        }
+    }
+}
+
+/// What one row reads of one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Span {
+    /// The step that made the frame did not pass this span.
+    OffRoute,
+    /// A stamp is missing or the two are out of order.
+    Missing,
+    Ns(u64),
+}
+
 /// Which table a row belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Group {
@@ -117,11 +168,26 @@ enum Group {
 struct Row {
     name: &'static str,
     group: Group,
+    route: Route,
     from: Stamp,
     to: Stamp,
     histogram: Histogram<u64>,
     /// Frames whose stamps for this span were missing or out of order.
     missing: u64,
+}
+
+impl Row {
+    fn span(&self, f: &IrFrame) -> Span {
+        if !self.route.takes(f) {
+            return Span::OffRoute;
+        }
+        let (a, b) = (self.from.of(f), self.to.of(f));
+        if a == 0 || b == 0 || b < a {
+            Span::Missing
+        } else {
+            Span::Ns(b - a)
+        }
+    }
 }
 
 fn histogram() -> Histogram<u64> {
@@ -132,9 +198,10 @@ fn histogram() -> Histogram<u64> {
 fn rows() -> Vec<Row> {
     use Stamp::{Cause, Frame};
     use stage::*;
-    let row = |name, group, from, to| Row {
+    let row = |name, group, route, from, to| Row {
         name,
         group,
+        route,
         from,
         to,
         histogram: histogram(),
@@ -142,38 +209,65 @@ fn rows() -> Vec<Row> {
     };
     vec![
         row(
+            "physics->estimator",
+            Group::Hop,
+            Route::Estimator,
+            Cause(FRAME_PUBLISHED),
+            Cause(ESTIMATOR_RECEIVED),
+        ),
+        row(
+            "estimator->planner",
+            Group::Hop,
+            Route::Estimator,
+            Cause(ESTIMATE_PUBLISHED),
+            Cause(PLANNER_RECEIVED),
+        ),
+        row(
             "physics->planner",
             Group::Hop,
+            Route::Direct,
             Cause(FRAME_PUBLISHED),
             Cause(PLANNER_RECEIVED),
         ),
         row(
             "planner->physics",
             Group::Hop,
+            Route::Any,
             Cause(COMMAND_PUBLISHED),
             Cause(COMMAND_RECEIVED),
         ),
         row(
+            "estimator",
+            Group::Stage,
+            Route::Estimator,
+            Cause(ESTIMATOR_RECEIVED),
+            Cause(ESTIMATE_PUBLISHED),
+        ),
+        row(
             "planner",
             Group::Stage,
+            Route::Any,
             Cause(PLANNER_RECEIVED),
             Cause(COMMAND_PUBLISHED),
         ),
         row(
             "physics.step",
             Group::Stage,
+            Route::Any,
             Cause(COMMAND_RECEIVED),
             Cause(COMMAND_APPLIED),
         ),
         row(
             "physics.publish",
             Group::Stage,
+            Route::Any,
             Cause(COMMAND_APPLIED),
             Frame(FRAME_PUBLISHED),
         ),
         row(
             "end_to_end",
             Group::EndToEnd,
+            Route::Any,
             Cause(FRAME_PUBLISHED),
             Cause(COMMAND_APPLIED),
         ),
@@ -230,6 +324,9 @@ struct Sampling {
     frames: u64,
     /// Frames with no cause (the first frame, a reset's frame).
     uncaused: u64,
+    /// Control steps sampled through the estimator and straight to the planner.
+    via_estimator: u64,
+    direct: u64,
     /// Wake-ups of the profiler.
     polls: u64,
     /// Physics steps between the first and the last frame taken, and the time between
@@ -266,6 +363,8 @@ fn sample_pipeline(instance: &Instance, seconds: f64) -> Result<Sampling> {
         rows: rows(),
         frames: 0,
         uncaused: 0,
+        via_estimator: 0,
+        direct: 0,
         polls: 0,
         steps: 0,
         span_ns: 0,
@@ -301,12 +400,15 @@ fn sample_pipeline(instance: &Instance, seconds: f64) -> Result<Sampling> {
                 s.uncaused += 1;
                 continue;
             }
+            match Route::of(&f) {
+                Route::Estimator => s.via_estimator += 1,
+                _ => s.direct += 1,
+            }
             for row in &mut s.rows {
-                let (a, b) = (row.from.of(&f), row.to.of(&f));
-                if a == 0 || b == 0 || b < a {
-                    row.missing += 1;
-                } else {
-                    row.histogram.saturating_record(b - a);
+                match row.span(&f) {
+                    Span::OffRoute => {}
+                    Span::Missing => row.missing += 1,
+                    Span::Ns(ns) => row.histogram.saturating_record(ns),
                 }
             }
         }
@@ -666,11 +768,12 @@ struct Report {
 }
 
 impl Report {
+    /// The figures of the rows of `group` some sampled step passed.
     fn figures(&self, group: Group) -> Vec<Figures> {
         self.sampling
             .rows
             .iter()
-            .filter(|r| r.group == group)
+            .filter(|r| r.group == group && !r.histogram.is_empty())
             .map(|r| Figures::new(r.name, &r.histogram))
             .collect()
     }
@@ -706,11 +809,27 @@ impl Report {
             ),
             None => println!("  physics steps/s: unknown (fewer than two frames of one run)"),
         }
+        for (route, n) in [
+            (Route::Estimator, s.via_estimator),
+            (Route::Direct, s.direct),
+        ] {
+            if n > 0 {
+                println!("  {n} sampled steps went {}", route.path());
+            }
+        }
         println!(
             "  floor: bare iceoryx2 ping-pong between two `agp` processes, same waiting, one-way = round trip / 2, {} round trips over {:.1} s after the sampling, {}",
             self.floor.round_trips,
             self.floor_seconds,
             self.floor_when()
+        );
+        let hops: Vec<Figures> = self.figures(Group::Hop);
+        println!(
+            "  hops of the sampled run: {}",
+            hops.iter()
+                .map(|f| f.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         );
         println!(
             "\n  {:<6} {:<18} {:>8} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
@@ -732,8 +851,8 @@ impl Report {
                     .map_or("-".to_owned(), |r| format!("{r:.1}x"))
             );
         };
-        for f in self.figures(Group::Hop) {
-            line("hop", &f);
+        for f in &hops {
+            line("hop", f);
         }
         for f in self.figures(Group::Stage) {
             line("stage", &f);
@@ -773,6 +892,14 @@ impl Report {
             .first()
             .map(|f| f.to_json(floor))
             .unwrap_or(serde_json::Value::Null);
+        let routes: Vec<serde_json::Value> = [
+            (Route::Estimator, s.via_estimator),
+            (Route::Direct, s.direct),
+        ]
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(r, n)| serde_json::json!({ "path": r.path(), "samples": n }))
+        .collect();
         serde_json::json!({
             "instance": self.instance,
             "waiting": self.waiting,
@@ -781,6 +908,7 @@ impl Report {
             "end_to_end": end_to_end,
             "floor": floor.to_json(floor),
             "samples": self.caused(),
+            "routes": routes,
             "sampling": {
                 "method": format!(
                     "every ~{} ms, the frames the subscriber's buffer held (no spinning)",
@@ -898,6 +1026,8 @@ fn plot_svg(series: &[(String, &Histogram<u64>)], instance: &str, waiting: &str)
             RGBColor(44, 160, 44),
             RGBColor(80, 80, 80),
             RGBColor(214, 39, 40),
+            RGBColor(148, 103, 189),
+            RGBColor(140, 86, 75),
         ];
         for (k, (name, d)) in data.iter().enumerate() {
             let colour = palette[k % palette.len()];
@@ -942,6 +1072,18 @@ mod tests {
         assert!(close(f.max_ns, 1_000_000), "max {}", f.max_ns);
     }
 
+    /// The spans of the rows `f`'s step passed, by row name.
+    fn spans(f: &IrFrame) -> Vec<(&'static str, u64)> {
+        rows()
+            .iter()
+            .filter_map(|r| match r.span(f) {
+                Span::Ns(ns) => Some((r.name, ns)),
+                Span::OffRoute => None,
+                Span::Missing => panic!("`{}` has no usable stamps", r.name),
+            })
+            .collect()
+    }
+
     #[test]
     fn the_spans_of_a_frame_are_read_from_its_cause_and_its_own_stamps() {
         let mut f = IrFrame::default();
@@ -956,12 +1098,8 @@ mod tests {
             f.cause.stamps_ns[i] = t;
         }
         f.timing.stamps_ns[stage::FRAME_PUBLISHED] = 275;
-        let spans: Vec<(&str, u64)> = rows()
-            .iter()
-            .map(|r| (r.name, r.to.of(&f) - r.from.of(&f)))
-            .collect();
         assert_eq!(
-            spans,
+            spans(&f),
             [
                 ("physics->planner", 30),
                 ("planner->physics", 40),
@@ -971,6 +1109,88 @@ mod tests {
                 ("end_to_end", 160),
             ]
         );
+    }
+
+    #[test]
+    fn a_step_through_the_estimator_is_measured_hop_by_hop_along_its_route() {
+        let mut f = IrFrame::default();
+        f.cause.trace_id = 9;
+        for (i, t) in [
+            (stage::FRAME_PUBLISHED, 100),
+            (stage::ESTIMATOR_RECEIVED, 112),
+            (stage::ESTIMATE_PUBLISHED, 120),
+            (stage::PLANNER_RECEIVED, 135),
+            (stage::COMMAND_PUBLISHED, 150),
+            (stage::COMMAND_RECEIVED, 190),
+            (stage::COMMAND_APPLIED, 260),
+        ] {
+            f.cause.stamps_ns[i] = t;
+        }
+        f.timing.stamps_ns[stage::FRAME_PUBLISHED] = 275;
+        assert_eq!(Route::of(&f), Route::Estimator);
+        // No physics->planner: PLANNER_RECEIVED is the estimate's receipt, not the frame's.
+        assert_eq!(
+            spans(&f),
+            [
+                ("physics->estimator", 12),
+                ("estimator->planner", 15),
+                ("planner->physics", 40),
+                ("estimator", 8),
+                ("planner", 15),
+                ("physics.step", 70),
+                ("physics.publish", 15),
+                ("end_to_end", 160),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_route_no_sampled_step_took_leaves_no_row_in_the_report() {
+        let mut sampling = Sampling {
+            rows: rows(),
+            frames: 1,
+            uncaused: 0,
+            via_estimator: 0,
+            direct: 1,
+            polls: 1,
+            steps: 0,
+            span_ns: 0,
+            elapsed: Duration::from_secs(1),
+        };
+        for r in &mut sampling.rows {
+            if r.route != Route::Estimator {
+                r.histogram.record(1_000).expect("in bounds");
+            }
+        }
+        let mut floor = histogram();
+        floor.record(500).expect("in bounds");
+        let report = Report {
+            instance: "t".to_owned(),
+            waiting: "block".to_owned(),
+            sampling,
+            floor_figures: Figures::new("floor", &floor),
+            floor: Floor {
+                histogram: floor,
+                round_trips: 1,
+            },
+            floor_seconds: 1.0,
+            paused: None,
+            load: None,
+        };
+        let v = report.to_json();
+        let names = |k: &str| -> Vec<String> {
+            v[k].as_array()
+                .expect("a list")
+                .iter()
+                .map(|r| r["name"].as_str().expect("a name").to_owned())
+                .collect()
+        };
+        assert_eq!(names("hops"), ["physics->planner", "planner->physics"]);
+        assert_eq!(
+            names("stages"),
+            ["planner", "physics.step", "physics.publish"]
+        );
+        assert_eq!(v["end_to_end"]["name"], "end_to_end");
     }
 
     #[test]
