@@ -112,6 +112,7 @@ fn run() -> Result<()> {
     }
     let idle = (args.idle_timeout_s > 0).then(|| Duration::from_secs(args.idle_timeout_s));
     let mut last_input = Instant::now();
+    let mut last_update = Instant::now();
     loop {
         let outcome = {
             let waiter = &estimator.waiter;
@@ -126,6 +127,14 @@ fn run() -> Result<()> {
             WaitOutcome::Ready(r) => {
                 r?;
                 last_input = Instant::now();
+                // iceoryx2 hands a publisher's history (the grids) to a new subscriber
+                // only in the publisher's `update_connections`: while frames keep coming
+                // the wait never times out, and a planner swapped in beside a driving one
+                // would never get its gradients.
+                if last_update.elapsed() >= WAIT_SLICE {
+                    last_update = Instant::now();
+                    estimator.update_connections()?;
+                }
             }
             WaitOutcome::Shutdown => return Ok(()),
             WaitOutcome::TimedOut => {

@@ -97,13 +97,7 @@ fn run() -> Result<()> {
     let (ports, inbox) = Ports::open(&instance, &node)?;
     let waiter = Waiter::new(inbox, WaitStrategy::from_env());
     let step_log = match &args.step_log {
-        Some(path) => Some(std::io::BufWriter::new(
-            std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(path)
-                .with_context(|| format!("cannot open the step log {}", path.display()))?,
-        )),
+        Some(path) => Some(StepLog::open(path)?),
         None => None,
     };
 
@@ -226,7 +220,7 @@ struct Runner {
     active_epoch: u64,
     trace_base: u64,
     rate_hz: f64,
-    step_log: Option<std::io::BufWriter<std::fs::File>>,
+    step_log: Option<StepLog>,
 }
 
 fn pose2(p: Pose) -> Pose2 {
@@ -412,9 +406,7 @@ impl Runner {
                 WaitOutcome::Ready(Some((l, r, mut cause))) => {
                     idle_since = Instant::now();
                     if let Some(log) = &mut self.step_log {
-                        use std::io::Write;
-                        writeln!(log, "{step} {}", self.active_epoch)
-                            .context("cannot write the step log")?;
+                        log.record(step, self.active_epoch)?;
                     }
                     {
                         let _in_simulation = alloc_count::enter(alloc_count::Region::Simulation);
@@ -661,6 +653,58 @@ mod alloc_count {
                 d(Region::Simulation),
                 d(Region::Iceoryx2),
             );
+        }
+    }
+}
+
+/// `--step-log`: one line `STEP EPOCH` per applied command, written in whole lines (a
+/// buffer of complete lines goes out in one write), so a physics killed with SIGKILL leaves
+/// no torn line for its restarted successor to append to: only its last unwritten lines
+/// are lost. Allocates nothing per step.
+struct StepLog {
+    file: std::fs::File,
+    lines: Vec<u8>,
+}
+
+impl StepLog {
+    /// Bytes of complete lines kept before they are written.
+    const FLUSH_AT: usize = 4096;
+
+    fn open(path: &std::path::Path) -> Result<Self> {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .with_context(|| format!("cannot open the step log {}", path.display()))?;
+        Ok(Self {
+            file,
+            lines: Vec::with_capacity(Self::FLUSH_AT + 64),
+        })
+    }
+
+    fn record(&mut self, step: u64, epoch: u64) -> Result<()> {
+        use std::io::Write;
+        writeln!(self.lines, "{step} {epoch}").context("cannot format the step log")?;
+        if self.lines.len() >= Self::FLUSH_AT {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        use std::io::Write;
+        self.file
+            .write_all(&self.lines)
+            .context("cannot write the step log")?;
+        self.lines.clear();
+        Ok(())
+    }
+}
+
+impl Drop for StepLog {
+    fn drop(&mut self) {
+        if let Err(e) = self.flush() {
+            eprintln!("agp-physics: {e:#}");
         }
     }
 }
