@@ -13,18 +13,89 @@ use agp_shared_types::Instance;
 /// every binary first (`cargo build --workspace --bins`).
 #[track_caller]
 pub fn bin_path(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().expect("the test executable has a path");
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("the test executable sits in target/<profile>/deps");
-    let path = dir.join(name);
+    let path = profile_dir().join(name);
     assert!(
         path.is_file(),
         "`{}` is missing: run `cargo build --workspace --bins` first",
         path.display()
     );
     path
+}
+
+/// The test's target folder of its profile (`target/debug/deps/<test>` -> `target/debug`),
+/// where the workspace's binaries are.
+#[track_caller]
+fn profile_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable has a path");
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("the test executable sits in target/<profile>/deps")
+        .to_path_buf()
+}
+
+/// The AG file of built-in scenario `scenario` (`triangle`, `square`, ...) learned with the
+/// paper's protocol by the real `agp bench learn` (seed 7, 60 trials at each alpha 0, +15,
+/// -15 deg), shared by every test binary: kept in `target/<profile>/agp-test-cache/`, next to
+/// the binaries.
+///
+/// Cost: the first call after `agp` was built runs `agp bench learn` once, about 7 s of
+/// one core in the debug test build (its dependencies are optimised; 6.7 s measured for the
+/// triangle on the project's 2-core machine, about 6 s in release); later calls cost
+/// nothing. A file older than `agp` is learned again, so a changed learner or AG format is
+/// never served stale.
+///
+/// Safe when several tests or test binaries ask at once: they take turns on a lock file
+/// (a lock held by a test that died is released with it), and each learning goes into a
+/// temporary folder of the cache and is renamed into place whole, so a reader never sees a
+/// torn file, even from a learner killed half-way.
+#[track_caller]
+pub fn learned_ag(scenario: &str) -> PathBuf {
+    use std::os::fd::AsRawFd;
+
+    let cache = profile_dir().join("agp-test-cache");
+    std::fs::create_dir_all(&cache).expect("create the test cache folder");
+    let file = cache.join(format!("{scenario}.ag"));
+    let lock = std::fs::File::create(cache.join(format!("{scenario}.lock")))
+        .expect("create the cache's lock file");
+    // SAFETY: flock(2) on a descriptor this function owns; released when it is closed.
+    let rc = unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) };
+    assert_eq!(
+        rc,
+        0,
+        "cannot lock the AG cache: {}",
+        std::io::Error::last_os_error()
+    );
+    let agp = bin_path("agp");
+    let built = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if let (Some(learned), Some(agp_built)) = (built(&file), built(&agp))
+        && learned >= agp_built
+    {
+        return file;
+    }
+    let tmp = tempfile::tempdir_in(&cache).expect("a temporary folder in the cache");
+    let out = tmp.path().to_str().expect("a UTF-8 cache path");
+    let run = run_agp(
+        &cache,
+        &["bench", "learn", "--scenario", scenario, "--out", out],
+        // Safety net only: one learning takes seconds.
+        Duration::from_secs(600),
+    );
+    assert!(
+        run.status.success(),
+        "`agp bench learn --scenario {scenario}` failed: {}\n{}\n{}",
+        run.status,
+        run.stdout,
+        run.stderr
+    );
+    let learned = tmp.path().join(format!("{scenario}.ag"));
+    assert!(
+        learned.is_file(),
+        "`agp bench learn` wrote no {}:\n{}",
+        learned.display(),
+        run.stdout
+    );
+    std::fs::rename(&learned, &file).expect("rename the learned AG file into place");
+    file
 }
 
 /// How many files instance `name` has on the machine: its `/dev/shm` entries plus its
@@ -133,6 +204,41 @@ impl AgpUp {
         self.child.id()
     }
 
+    /// Polls `ok` (an outcome, not the time it takes) until it holds, while the run goes
+    /// on. Panics with everything the run printed if it ends first, or if `timeout` (a
+    /// safety net) passes.
+    #[track_caller]
+    pub fn until(&mut self, what: &str, timeout: Duration, mut ok: impl FnMut() -> bool) {
+        let deadline = Instant::now() + timeout;
+        while !ok() {
+            let ended = self.child.try_wait().expect("watch agp");
+            if ended.is_none() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(2));
+                continue;
+            }
+            // What it printed until now (all of it, once it exited and the pipe closed).
+            let drain = if ended.is_some() {
+                Duration::from_secs(2)
+            } else {
+                Duration::ZERO
+            };
+            while let Ok(line) = self.lines.recv_timeout(drain) {
+                self.stdout.push(line);
+            }
+            let stderr = self.stderr.recv_timeout(drain).unwrap_or_default();
+            match ended {
+                Some(status) => panic!(
+                    "the run ended ({status}) before {what}; stdout:\n{}\nstderr:\n{stderr}",
+                    self.stdout.join("\n")
+                ),
+                None => panic!(
+                    "{what} did not come within {timeout:?}; stdout so far:\n{}",
+                    self.stdout.join("\n")
+                ),
+            }
+        }
+    }
+
     /// Sends `signal` to the supervisor.
     pub fn signal(&self, signal: libc::c_int) {
         let pid = libc::pid_t::try_from(self.child.id()).expect("pid fits");
@@ -212,6 +318,60 @@ impl AgpUp {
     }
 }
 
+/// A test that fails half-way does not leave its run going: the supervisor is stopped the
+/// way `agp down` would (SIGTERM: it stops its children and removes the instance's files),
+/// killed if it is still there 10 s later.
+impl Drop for AgpUp {
+    fn drop(&mut self) {
+        if !matches!(self.child.try_wait(), Ok(None)) {
+            return;
+        }
+        if let Ok(pid) = libc::pid_t::try_from(self.child.id()) {
+            // SAFETY: plain kill(2) of our own child, not reaped yet.
+            unsafe { libc::kill(pid, libc::SIGTERM) };
+        }
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while matches!(self.child.try_wait(), Ok(None)) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Brings instance `name` down (`agp down`) if the test panics while it is up: a detached
+/// supervisor left running would disturb the next run of the test.
+pub struct DownOnPanic {
+    dir: PathBuf,
+    name: String,
+}
+
+impl DownOnPanic {
+    /// Guards instance `name`, brought down from `dir`.
+    pub fn new(dir: &Path, name: &str) -> Self {
+        Self {
+            dir: dir.to_path_buf(),
+            name: name.to_owned(),
+        }
+    }
+}
+
+impl Drop for DownOnPanic {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            return;
+        }
+        let agp = profile_dir().join("agp");
+        let _ = Command::new(agp)
+            .args(["down", "--instance", &self.name])
+            .current_dir(&self.dir)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
+    }
+}
+
 /// Runs `agp <args...>` in `dir` to its end (at most `timeout`, a safety net).
 #[track_caller]
 pub fn run_agp(dir: &Path, args: &[&str], timeout: Duration) -> Finished {
@@ -253,6 +413,69 @@ pub fn run_agp(dir: &Path, args: &[&str], timeout: Duration) -> Finished {
         status,
         stdout: out_thread.join().unwrap_or_default(),
         stderr: err_thread.join().unwrap_or_default(),
+    }
+}
+
+/// Physics's step log (`agp-physics --step-log`: `step epoch` per applied command) read as
+/// it grows: each poll reads only what was appended since the last, so a test can watch a
+/// run of hundreds of thousands of steps without rereading it.
+pub struct StepLog {
+    path: PathBuf,
+    file: Option<std::fs::File>,
+    /// The end of a line physics is still writing.
+    partial: Vec<u8>,
+    entries: Vec<(u64, u64)>,
+}
+
+impl StepLog {
+    /// The log at `path` (it may not exist yet).
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            file: None,
+            partial: Vec::new(),
+            entries: Vec::new(),
+        }
+    }
+
+    /// Reads what was appended; every complete `(step, epoch)` line so far, in order.
+    /// (Physics writes through a buffer: the lines are there up to its last flush.)
+    #[track_caller]
+    pub fn poll(&mut self) -> &[(u64, u64)] {
+        if self.file.is_none() {
+            self.file = std::fs::File::open(&self.path).ok();
+        }
+        let Some(file) = &mut self.file else {
+            return &self.entries;
+        };
+        let start = self.partial.len();
+        file.read_to_end(&mut self.partial)
+            .expect("read the step log");
+        if let Some(end) = self.partial[start..].iter().rposition(|&b| b == b'\n') {
+            let complete: Vec<u8> = self.partial.drain(..=start + end).collect();
+            for line in complete.split(|&b| b == b'\n').filter(|l| !l.is_empty()) {
+                let text = std::str::from_utf8(line).expect("a UTF-8 step log");
+                let mut it = text.split_whitespace().map(|v| {
+                    v.parse::<u64>()
+                        .unwrap_or_else(|e| panic!("step log line `{text}`: {e}"))
+                });
+                match (it.next(), it.next()) {
+                    (Some(step), Some(epoch)) => self.entries.push((step, epoch)),
+                    _ => panic!("step log line `{text}`: expected `step epoch`"),
+                }
+            }
+        }
+        &self.entries
+    }
+
+    /// How many steps were applied (complete lines so far).
+    pub fn len(&mut self) -> usize {
+        self.poll().len()
+    }
+
+    /// Whether no step was applied yet.
+    pub fn is_empty(&mut self) -> bool {
+        self.len() == 0
     }
 }
 

@@ -10,7 +10,11 @@
 //! `oracle` reads ground truth, and says so.
 //!
 //! A hot-swapped planner (epoch > 0) takes the world as it finds it: it finds the object
-//! again and pushes on towards the same goal.
+//! again and pushes on towards the same goal. So does a restarted one. The robot may then
+//! have the object beside or behind it (its predecessor was travelling round the object or
+//! circling it), while the episode's first step drives straight ahead to find it: a planner
+//! that takes over a world under way first turns in place to face what its IR sees
+//! ([`face_object`]).
 
 use std::time::Duration;
 
@@ -171,6 +175,9 @@ pub fn run(
         trace: settings.trace,
         ..EpisodeConfig::for_scenario(scenario)
     };
+    // Steps were applied before this planner came: it takes over a world under way (the
+    // oracle knows where the object is and needs no finding).
+    let taking_over = world.step_count() > 0 && !settings.planner.reads_ground_truth();
     println!(
         "planner `{}`{}: {} of `{}`",
         settings.planner,
@@ -183,6 +190,20 @@ pub fn run(
         scenario.name
     );
     loop {
+        if taking_over && world.step_count() > 0 {
+            match face_object(&mut world, &robot) {
+                Ok(facing) => println!(
+                    "planner: taking over at step {}: {facing}",
+                    world.step_count()
+                ),
+                Err(WorldStepError::Shutdown) => return Ok(None),
+                // A new world from the scenario's start: the robot faces the object.
+                Err(WorldStepError::Restarted) => {
+                    println!("planner: physics restarted: the episode starts over");
+                }
+                Err(e) => return Err(anyhow!(e)),
+            }
+        }
         let outcome = drive_episode(
             &mut world,
             scenario,
@@ -220,6 +241,90 @@ pub fn run(
             Err(e) => return Err(anyhow!(e)),
         }
     }
+}
+
+/// How [`face_object`] left the robot.
+enum Facing {
+    /// A front ray saw the object at the start: nothing to do.
+    Ahead,
+    /// Turned `turned_rad` in place until a front ray gave the strongest reading.
+    Turned { turned_rad: f64 },
+    /// No ray saw anything within a full turn: the robot is back at its heading.
+    NotSeen,
+}
+
+impl std::fmt::Display for Facing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Ahead => write!(f, "the object is ahead"),
+            Self::Turned { turned_rad } => write!(
+                f,
+                "turned {:+.0} deg in place to face the object",
+                turned_rad.to_degrees()
+            ),
+            Self::NotSeen => write!(f, "no IR sees the object within a full turn"),
+        }
+    }
+}
+
+/// Wheel speed of the turn in place, as a fraction of the fastest: about 1 deg of turn
+/// per IR sample.
+const FACE_TURN_FRACTION: f64 = 0.25;
+
+/// The sensor with the strongest reading among those that see something in range.
+fn strongest(
+    robot: &RobotDescription,
+    ir_raw: &[f32; agp_shared_types::IR_SENSOR_COUNT],
+) -> Option<usize> {
+    ir_raw
+        .iter()
+        .enumerate()
+        .filter(|&(_, &raw)| robot.response.distance(f64::from(raw)).is_some())
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+}
+
+/// findObj for a planner that takes over a world under way: turns in place towards the
+/// sensor with the strongest IR reading until it is one of the two front rays (IR1, IR8 at
+/// +-17 deg), so the episode's approach, straight ahead, meets the object. At most one
+/// full turn; the robot does not move from its place.
+fn face_object(
+    world: &mut PipelineWorld,
+    robot: &RobotDescription,
+) -> Result<Facing, WorldStepError> {
+    let front = |i: usize| robot.ir_sensors[i].angle_rad.abs() < 20f64.to_radians();
+    let senses = world.senses();
+    if strongest(robot, &senses.ir_raw).is_some_and(front) {
+        return Ok(Facing::Ahead);
+    }
+    let v = FACE_TURN_FRACTION * robot.max_wheel_speed;
+    let rate = 2.0 * v / robot.axle_length;
+    let limit = std::f64::consts::TAU / rate * 1.05;
+    let t0 = world.sim_time();
+    let mut heading = senses.odometry.theta;
+    let mut turned = 0f64;
+    let mut sample = senses.ir_sample;
+    // Towards the strongest reading; left (counter-clockwise) when nothing is seen.
+    let mut left =
+        strongest(robot, &senses.ir_raw).is_none_or(|i| robot.ir_sensors[i].angle_rad > 0.0);
+    while world.sim_time() - t0 < limit && turned.abs() < std::f64::consts::TAU {
+        let (l, r) = if left { (-v, v) } else { (v, -v) };
+        world.step(l, r)?;
+        let s = world.senses();
+        turned += agp_world::wrap_angle(s.odometry.theta - heading);
+        heading = s.odometry.theta;
+        if s.ir_sample == sample {
+            continue;
+        }
+        sample = s.ir_sample;
+        if let Some(i) = strongest(robot, &s.ir_raw) {
+            if front(i) {
+                return Ok(Facing::Turned { turned_rad: turned });
+            }
+            left = robot.ir_sensors[i].angle_rad > 0.0;
+        }
+    }
+    Ok(Facing::NotSeen)
 }
 
 fn describe(g: &AffordanceGradient) {
