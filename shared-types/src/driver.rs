@@ -37,6 +37,12 @@ pub enum DriveError {
 /// acts on the estimator's estimate of a frame rather than on the frame itself says so with
 /// [`LockstepDriver::note_estimate`], so its command's timing covers the estimator's hops.
 ///
+/// [`LockstepDriver::step`] and [`LockstepDriver::reset`] send and wait on the IR frames'
+/// event service. A client that waits on another event instead (the learning planner waits
+/// for the estimator's acknowledgement of the next frame, which implies the frame is
+/// published) splits them: [`LockstepDriver::send`] or [`LockstepDriver::send_reset`], then
+/// [`LockstepDriver::take_frame`] (no wait) or [`LockstepDriver::await_frame`].
+///
 /// With `ground_truth`, it also reads the true poses: that makes it an evaluation tool, which
 /// no estimator or planner may be.
 pub struct LockstepDriver {
@@ -49,6 +55,8 @@ pub struct LockstepDriver {
     epochs: Subscriber<ipc::Service, ActiveEpoch, ()>,
     waiter: Waiter,
     frame: IrFrame,
+    /// The frame the last command or reset will make, until it is taken.
+    awaited: Option<Awaited>,
     last_truth: GroundTruth,
     epoch: u64,
     timeout: Duration,
@@ -56,6 +64,63 @@ pub struct LockstepDriver {
     /// `trace_id - step` of the physics process being driven: each run of physics has its
     /// own, so a frame with another one comes from a restarted physics.
     trace_base: u64,
+}
+
+/// Which frame the driver waits for.
+#[derive(Debug, Clone, Copy)]
+enum Awaited {
+    /// Any: the first frame after connecting.
+    Any,
+    /// The frame made by the command for `step`, in the world of reset `reset_seq`. Normally
+    /// the frame of `step + 1`; after a hot swap's flip the frames may have moved on under
+    /// the other planner: then the latest.
+    After { step: u64, reset_seq: u64 },
+    /// The frame of the world reset `seq` put in place (still of step `step`).
+    Reset { step: u64, seq: u64 },
+}
+
+impl Awaited {
+    fn accepts(self, f: &IrFrame) -> bool {
+        match self {
+            Self::Any => true,
+            Self::After { step, reset_seq } => f.step > step && f.reset_seq == reset_seq,
+            Self::Reset { seq, .. } => f.reset_seq == seq,
+        }
+    }
+
+    /// The step a [`DriveError::NoFrame`] names.
+    fn step(self) -> u64 {
+        match self {
+            Self::Any => 0,
+            Self::After { step, .. } => step + 1,
+            Self::Reset { step, .. } => step,
+        }
+    }
+}
+
+/// What the subscriber holds: the latest frame `awaited` accepts, or, if any, the latest
+/// frame of another physics run than `base` (`base` 0: none seen yet, every run is
+/// accepted). Stamps the planner's receive on the frame returned.
+fn poll_frames(
+    frames: &Subscriber<ipc::Service, IrFrame, ()>,
+    base: u64,
+    awaited: Awaited,
+) -> Option<Result<IrFrame, IrFrame>> {
+    let first = base == 0;
+    let mut found = None;
+    while let Ok(Some(f)) = frames.receive() {
+        let run = f.timing.trace_id.wrapping_sub(f.step);
+        if !first && run != base {
+            found = Some(Err(*f));
+        } else if awaited.accepts(&f) && !matches!(found, Some(Err(_))) {
+            found = Some(Ok(*f));
+        }
+    }
+    // The planner's receive is stamped on the frame returned, once.
+    if let Some(Ok(f) | Err(f)) = &mut found {
+        f.timing.stamps_ns[stage::PLANNER_RECEIVED] = monotonic_ns();
+    }
+    found
 }
 
 fn port<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> DriveError {
@@ -128,6 +193,7 @@ impl LockstepDriver {
             epochs,
             waiter: Waiter::new(listener, WaitStrategy::from_env()),
             frame: IrFrame::default(),
+            awaited: Some(Awaited::Any),
             last_truth: GroundTruth::default(),
             epoch,
             timeout,
@@ -135,7 +201,7 @@ impl LockstepDriver {
             trace_base: 0,
             _node: node,
         };
-        driver.frame = driver.wait_frame(|_| true, 0)?;
+        driver.await_frame()?;
         Ok(driver)
     }
 
@@ -210,50 +276,56 @@ impl LockstepDriver {
         &self.last_truth
     }
 
-    /// Waits for a frame `accept` takes (the latest of them). A frame of another physics
-    /// run than the last one seen means physics restarted: that frame becomes the latest
-    /// and the wait ends with [`DriveError::PhysicsRestarted`].
-    fn wait_frame(
-        &mut self,
-        accept: impl Fn(&IrFrame) -> bool,
-        step: u64,
-    ) -> Result<IrFrame, DriveError> {
+    /// Takes the frame the last command or reset made if the subscriber holds it, without
+    /// waiting: `None` if it is not there yet. With nothing awaited, the latest frame. A
+    /// frame of another physics run than the last one seen means physics restarted: that
+    /// frame becomes the latest and this returns [`DriveError::PhysicsRestarted`].
+    pub fn take_frame(&mut self) -> Result<Option<&IrFrame>, DriveError> {
+        let Some(awaited) = self.awaited else {
+            return Ok(Some(&self.frame));
+        };
+        match poll_frames(&self.frames, self.trace_base, awaited) {
+            None => Ok(None),
+            Some(found) => self.accept(found).map(Some),
+        }
+    }
+
+    /// Waits (up to the driver's timeout) for the frame the last command or reset made and
+    /// returns it; with nothing awaited, the latest frame. Ends with
+    /// [`DriveError::PhysicsRestarted`] as [`LockstepDriver::take_frame`] does.
+    pub fn await_frame(&mut self) -> Result<&IrFrame, DriveError> {
+        let Some(awaited) = self.awaited else {
+            return Ok(&self.frame);
+        };
         let frames = &self.frames;
         let base = self.trace_base;
-        let first = base == 0;
-        let outcome = self.waiter.wait_for(self.timeout, || {
-            let mut found = None;
-            while let Ok(Some(f)) = frames.receive() {
-                let run = f.timing.trace_id.wrapping_sub(f.step);
-                if !first && run != base {
-                    found = Some(Err(*f));
-                } else if accept(&f) && !matches!(found, Some(Err(_))) {
-                    found = Some(Ok(*f));
-                }
-            }
-            // The planner's receive is stamped on the frame the wait returns, once.
-            if let Some(Ok(f) | Err(f)) = &mut found {
-                f.timing.stamps_ns[stage::PLANNER_RECEIVED] = monotonic_ns();
-            }
-            found
-        });
-        let frame = match outcome {
-            WaitOutcome::Ready(Ok(f)) => f,
-            WaitOutcome::Ready(Err(f)) => {
-                self.trace_base = f.timing.trace_id.wrapping_sub(f.step);
-                self.frame = f;
-                return Err(DriveError::PhysicsRestarted);
-            }
-            WaitOutcome::TimedOut => {
-                return Err(DriveError::NoFrame {
-                    step,
-                    timeout: self.timeout,
-                });
-            }
-            WaitOutcome::Shutdown => return Err(DriveError::Shutdown),
+        match self
+            .waiter
+            .wait_for(self.timeout, || poll_frames(frames, base, awaited))
+        {
+            WaitOutcome::Ready(found) => self.accept(found),
+            WaitOutcome::TimedOut => Err(DriveError::NoFrame {
+                step: awaited.step(),
+                timeout: self.timeout,
+            }),
+            WaitOutcome::Shutdown => Err(DriveError::Shutdown),
+        }
+    }
+
+    /// Makes a polled frame the latest: the awaited one (`Ok`), with its step's ground
+    /// truth, or the first of a restarted physics (`Err`).
+    fn accept(&mut self, found: Result<IrFrame, IrFrame>) -> Result<&IrFrame, DriveError> {
+        self.awaited = None;
+        let (frame, restarted) = match found {
+            Ok(f) => (f, false),
+            Err(f) => (f, true),
         };
-        if first {
+        if restarted || self.trace_base == 0 {
             self.trace_base = frame.timing.trace_id.wrapping_sub(frame.step);
+        }
+        self.frame = frame;
+        if restarted {
+            return Err(DriveError::PhysicsRestarted);
         }
         if let Some(t) = &self.truth {
             // Physics publishes a step's truth before its frame.
@@ -263,11 +335,18 @@ impl LockstepDriver {
                 }
             }
         }
-        Ok(frame)
+        Ok(&self.frame)
     }
 
     /// Applies wheel speeds for one step and returns the next frame.
     pub fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<&IrFrame, DriveError> {
+        self.send(left_mps, right_mps)?;
+        self.await_frame()
+    }
+
+    /// Publishes the motor command for the latest frame's step; the frame it makes is then
+    /// taken with [`LockstepDriver::take_frame`] or [`LockstepDriver::await_frame`].
+    pub fn send(&mut self, left_mps: f64, right_mps: f64) -> Result<(), DriveError> {
         let step = self.frame.step;
         let mut cmd = MotorCommand {
             step,
@@ -292,16 +371,23 @@ impl LockstepDriver {
             .send()
             .map_err(|e| DriveError::Port(format!("send of a motor command: {e:?}")))?;
         let _ = self.physics_inbox.notify();
-        let reset_seq = self.frame.reset_seq;
-        // Normally the frame of the next step; after a hot swap's flip the frames may have
-        // moved on under the other planner: then the latest.
-        self.frame = self.wait_frame(|f| f.step > step && f.reset_seq == reset_seq, step + 1)?;
-        Ok(&self.frame)
+        self.awaited = Some(Awaited::After {
+            step,
+            reset_seq: self.frame.reset_seq,
+        });
+        Ok(())
     }
 
     /// Puts object and robot at the given world poses (odometry restarts at the robot's
     /// pose) and returns the frame of the reset world.
     pub fn reset(&mut self, object: Pose2, robot: Pose2) -> Result<&IrFrame, DriveError> {
+        self.send_reset(object, robot)?;
+        self.await_frame()
+    }
+
+    /// Publishes a reset (as [`LockstepDriver::reset`]); the frame of the reset world is
+    /// then taken with [`LockstepDriver::take_frame`] or [`LockstepDriver::await_frame`].
+    pub fn send_reset(&mut self, object: Pose2, robot: Pose2) -> Result<(), DriveError> {
         self.resets_sent += 1;
         // Unique per driver and reset, so an old frame is never taken for the new world.
         let seq = (monotonic_ns() & !0xffff) | (self.resets_sent & 0xffff);
@@ -319,8 +405,10 @@ impl LockstepDriver {
             .send()
             .map_err(|e| DriveError::Port(format!("send of a reset: {e:?}")))?;
         let _ = self.physics_inbox.notify();
-        let step = self.frame.step;
-        self.frame = self.wait_frame(|f| f.reset_seq == seq, step)?;
-        Ok(&self.frame)
+        self.awaited = Some(Awaited::Reset {
+            step: self.frame.step,
+            seq,
+        });
+        Ok(())
     }
 }

@@ -15,6 +15,13 @@
 //! stamp, unique per published frame even across resets). So the estimator has seen every
 //! frame before the planner sends an event about it or the command that makes the next
 //! frame, and draining events before each frame gives it the protocol in order.
+//!
+//! Waiting: after a command or a reset the planner waits on the estimates' event service
+//! only, never on the frames': the estimator acknowledges a frame only after physics
+//! published it, so once the acknowledgement of a frame newer than the latest is in, the
+//! new frame is in the planner's subscriber too and is taken without waiting. Each physics
+//! step thus wakes (or keeps spinning) one process, the estimator, not two competing for
+//! the cores physics needs.
 
 use std::f64::consts::{PI, TAU};
 use std::time::Duration;
@@ -95,6 +102,9 @@ struct EstimatorLink {
     seq: u64,
     /// Publish stamp of the newest frame the estimator acknowledged.
     acked_stamp: u64,
+    /// The estimate of that frame and when it was received (CLOCK_MONOTONIC), until the
+    /// command answering the frame took its stamps.
+    latest: Option<(ObjectEstimate, u64)>,
     /// The latest trial counts the estimator reported.
     learned: u32,
     rejected: u32,
@@ -159,6 +169,7 @@ impl EstimatorLink {
             ),
             seq: 0,
             acked_stamp: 0,
+            latest: None,
             learned: 0,
             rejected: 0,
             timeout,
@@ -167,36 +178,34 @@ impl EstimatorLink {
     }
 
     /// Waits until the estimator has seen `frame` (or a later one). Returns the estimator's
-    /// estimate of `frame` itself and when it was received (CLOCK_MONOTONIC), if this wait
-    /// took it: the command answering `frame` carries its stamps.
+    /// estimate of `frame` itself and when it was received (CLOCK_MONOTONIC), once: the
+    /// command answering `frame` carries its stamps.
     fn ack(&mut self, frame: &IrFrame) -> Result<Option<(ObjectEstimate, u64)>> {
         let stamp = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
-        if self.acked_stamp >= stamp {
-            return Ok(None);
-        }
-        let estimates = &self.estimates;
-        let mut acked = self.acked_stamp;
-        let mut own = None;
-        let outcome = self.estimates_waiter.wait_for(self.timeout, || {
-            while let Ok(Some(e)) = estimates.receive() {
-                let published = e.timing.stamps_ns[stage::FRAME_PUBLISHED];
-                if published == stamp {
-                    own = Some((*e, monotonic_ns()));
-                }
-                acked = acked.max(published);
+        if self.acked_stamp < stamp {
+            let estimates = &self.estimates;
+            let (mut acked, mut latest) = (self.acked_stamp, self.latest);
+            let outcome = self.estimates_waiter.wait_for(self.timeout, || {
+                take_estimates(estimates, &mut acked, &mut latest);
+                (acked >= stamp).then_some(())
+            });
+            (self.acked_stamp, self.latest) = (acked, latest);
+            match outcome {
+                WaitOutcome::Ready(()) => {}
+                WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
+                WaitOutcome::TimedOut => return Err(self.no_ack(frame.step)),
             }
-            (acked >= stamp).then_some(())
-        });
-        self.acked_stamp = acked;
-        match outcome {
-            WaitOutcome::Ready(()) => Ok(own),
-            WaitOutcome::Shutdown => Err(DriveError::Shutdown.into()),
-            WaitOutcome::TimedOut => bail!(
-                "the estimator did not acknowledge the frame of step {} within {:?}: is `agp-estimator` running on this instance?",
-                frame.step,
-                self.timeout
-            ),
         }
+        Ok(self
+            .latest
+            .take_if(|(e, _)| e.timing.stamps_ns[stage::FRAME_PUBLISHED] == stamp))
+    }
+
+    fn no_ack(&self, step: u64) -> anyhow::Error {
+        anyhow!(
+            "the estimator did not acknowledge the frame of step {step} within {:?}: is `agp-estimator` running on this instance?",
+            self.timeout
+        )
     }
 
     /// Sends one event about `frame`.
@@ -270,6 +279,22 @@ impl EstimatorLink {
     }
 }
 
+/// Takes the estimates that arrived: raises `acked` to the newest acknowledged publish
+/// stamp and keeps that frame's estimate, with its receipt, in `latest`.
+fn take_estimates(
+    estimates: &Subscriber<ipc::Service, ObjectEstimate, ()>,
+    acked: &mut u64,
+    latest: &mut Option<(ObjectEstimate, u64)>,
+) {
+    while let Ok(Some(e)) = estimates.receive() {
+        let published = e.timing.stamps_ns[stage::FRAME_PUBLISHED];
+        if published > *acked {
+            *acked = published;
+            *latest = Some((*e, monotonic_ns()));
+        }
+    }
+}
+
 /// The protocol's driver: physics through the lockstep driver, each frame acknowledged by
 /// the estimator before it is acted on.
 struct Learner<'a> {
@@ -307,13 +332,59 @@ impl Learner<'_> {
     }
 
     fn step(&mut self, l: f64, r: f64) -> Result<IrFrame> {
-        let f = *self.driver.step(l, r)?;
-        self.ack(&f)?;
-        Ok(f)
+        self.driver.send(l, r)?;
+        let next = self.driver.frame().step + 1;
+        self.next_frame(next)
     }
 
     fn reset(&mut self, robot: Pose2) -> Result<IrFrame> {
-        let f = *self.driver.reset(self.object0, robot)?;
+        self.driver.send_reset(self.object0, robot)?;
+        let same = self.driver.frame().step;
+        self.next_frame(same)
+    }
+
+    /// The frame the command or reset just sent makes (of step `step`), once the estimator
+    /// acknowledged it. Waits on the estimates alone. The frames are polled on each turn of
+    /// the wait (the frame usually comes first, and a restarted physics shows there) but
+    /// waited on only in the rare case of an acknowledgement that reached this planner
+    /// before the frame did (physics preempted between its subscribers' deliveries).
+    fn next_frame(&mut self, step: u64) -> Result<IrFrame> {
+        let before = self.driver.frame().timing.stamps_ns[stage::FRAME_PUBLISHED];
+        let driver = &mut self.driver;
+        let link = &mut self.link;
+        let estimates = &link.estimates;
+        let (mut acked, mut latest) = (link.acked_stamp, link.latest);
+        let mut taken = None;
+        let outcome = link.estimates_waiter.wait_for(link.timeout, || {
+            take_estimates(estimates, &mut acked, &mut latest);
+            if taken.is_none() {
+                match driver.take_frame() {
+                    Ok(Some(f)) => taken = Some(f.timing.stamps_ns[stage::FRAME_PUBLISHED]),
+                    Ok(None) => {}
+                    Err(e) => return Some(Err(e)),
+                }
+            }
+            // Acknowledged: the frame taken, or (not yet taken) one newer than `before`.
+            (acked >= taken.unwrap_or(before + 1)).then_some(Ok(()))
+        });
+        (link.acked_stamp, link.latest) = (acked, latest);
+        match outcome {
+            WaitOutcome::Ready(Ok(())) => {}
+            WaitOutcome::Ready(Err(e)) => return Err(e.into()),
+            WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
+            WaitOutcome::TimedOut if taken.is_some() => return Err(link.no_ack(step)),
+            WaitOutcome::TimedOut => {
+                return Err(DriveError::NoFrame {
+                    step,
+                    timeout: link.timeout,
+                }
+                .into());
+            }
+        }
+        let f = match taken {
+            Some(_) => *driver.frame(),
+            None => *driver.await_frame()?,
+        };
         self.ack(&f)?;
         Ok(f)
     }
