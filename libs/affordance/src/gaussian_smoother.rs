@@ -3,6 +3,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 use crate::Grid;
+use crate::simd::Simd;
 
 const N: usize = GRID_SIDE;
 
@@ -37,8 +38,8 @@ pub struct GaussianSmoother {
     /// Result of the first pass, between `radius` rows of zeros above and below (never
     /// written), so the second pass needs no bounds tests.
     scratch: Vec<f32>,
-    /// The CPU has AVX2 and FMA: the separable passes run in their AVX2 build.
-    simd: bool,
+    /// The widest vector build of the separable passes this CPU runs.
+    simd: Simd,
     /// Banded kernel matrix `K[r][c] = kernel[c - r + radius]`.
     kernel_matrix: Mat<f32>,
     /// `K * A`.
@@ -85,7 +86,7 @@ impl GaussianSmoother {
             kernel,
             padded_row: vec![0.0; N + 2 * radius],
             scratch: vec![0.0; GRID_CELLS + 2 * radius * N],
-            simd: simd_available(),
+            simd: Simd::detect(),
             kernel_matrix,
             product: Mat::zeros(N, N),
         }
@@ -171,10 +172,17 @@ impl GaussianSmoother {
     fn rows_pass(&mut self, src: &[f32]) {
         let out = &mut self.scratch[self.radius * N..self.radius * N + GRID_CELLS];
         #[cfg(target_arch = "x86_64")]
-        if self.simd {
-            // SAFETY: `simd` is true only if the CPU reported AVX2 and FMA.
-            unsafe { rows_pass_avx2(&self.kernel, &mut self.padded_row, src, out) };
-            return;
+        match self.simd {
+            // SAFETY: `simd` says what the CPU reported.
+            Simd::Avx512 => {
+                unsafe { rows_pass_avx512(&self.kernel, &mut self.padded_row, src, out) };
+                return;
+            }
+            Simd::Avx2 => {
+                unsafe { rows_pass_avx2(&self.kernel, &mut self.padded_row, src, out) };
+                return;
+            }
+            Simd::Baseline => {}
         }
         rows_pass_body::<false>(&self.kernel, &mut self.padded_row, src, out);
     }
@@ -182,10 +190,17 @@ impl GaussianSmoother {
     /// Vertical pass: `dst` = the first pass's result convolved along y.
     fn columns_pass(&self, dst: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if self.simd {
-            // SAFETY: `simd` is true only if the CPU reported AVX2 and FMA.
-            unsafe { columns_pass_avx2(&self.kernel, &self.scratch, dst) };
-            return;
+        match self.simd {
+            // SAFETY: `simd` says what the CPU reported.
+            Simd::Avx512 => {
+                unsafe { columns_pass_avx512(&self.kernel, &self.scratch, dst) };
+                return;
+            }
+            Simd::Avx2 => {
+                unsafe { columns_pass_avx2(&self.kernel, &self.scratch, dst) };
+                return;
+            }
+            Simd::Baseline => {}
         }
         columns_pass_body::<false>(&self.kernel, &self.scratch, dst);
     }
@@ -250,17 +265,6 @@ const BLOCK: usize = 32;
 #[inline(always)]
 fn madd<const FMA: bool>(w: f32, x: f32, a: f32) -> f32 {
     if FMA { w.mul_add(x, a) } else { a + w * x }
-}
-
-fn simd_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
 }
 
 /// `out` (N x N) = `src` convolved along x with `kernel` (2r + 1 taps), through `padded`
@@ -329,4 +333,58 @@ fn rows_pass_avx2(kernel: &[f32], padded: &mut [f32], src: &[f32], out: &mut [f3
 #[target_feature(enable = "avx2,fma")]
 fn columns_pass_avx2(kernel: &[f32], src: &[f32], dst: &mut [f32]) {
     columns_pass_body::<true>(kernel, src, dst);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn rows_pass_avx512(kernel: &[f32], padded: &mut [f32], src: &[f32], out: &mut [f32]) {
+    rows_pass_body::<true>(kernel, padded, src, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn columns_pass_avx512(kernel: &[f32], src: &[f32], dst: &mut [f32]) {
+    columns_pass_body::<true>(kernel, src, dst);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every vector build this CPU runs gives the baseline build's result (the public tests
+    /// see only the widest one).
+    #[test]
+    fn every_vector_build_smooths_as_the_baseline() {
+        let mut smoother = GaussianSmoother::new(2.0);
+        let src: Vec<f32> = (0..GRID_CELLS)
+            .map(|c| ((c * 7919) % 1009) as f32 / 1009.0)
+            .collect();
+        let run = |smoother: &mut GaussianSmoother, simd: Simd| {
+            smoother.simd = simd;
+            let mut dst = vec![0.0_f32; GRID_CELLS];
+            smoother.rows_pass(&src);
+            smoother.columns_pass(&mut dst);
+            dst
+        };
+        let baseline = run(&mut smoother, Simd::Baseline);
+        let mut builds = vec![];
+        match Simd::detect() {
+            Simd::Avx512 => builds.extend([Simd::Avx2, Simd::Avx512]),
+            Simd::Avx2 => builds.push(Simd::Avx2),
+            Simd::Baseline => {}
+        }
+        for simd in builds {
+            let out = run(&mut smoother, simd);
+            let worst = out
+                .iter()
+                .zip(&baseline)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0_f32, f32::max);
+            // FMA rounds once where the baseline rounds twice.
+            assert!(
+                worst < 1e-6,
+                "{simd:?} differs from the baseline by {worst}"
+            );
+        }
+    }
 }

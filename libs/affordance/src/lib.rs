@@ -10,6 +10,7 @@ mod grid;
 mod grid_set_assembler;
 mod push_predictor;
 mod shape_matcher;
+mod simd;
 
 pub use affordance_gradient::{
     AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE, Prediction,

@@ -8,12 +8,19 @@ use faer::{Mat, Par};
 use glam::DVec2;
 
 use crate::Grid;
+use crate::simd::Simd;
 
 /// Smallest coarse rotation step, degrees (at most 60 coarse trials).
 const MIN_COARSE_STEP_DEG: f64 = 6.0;
 
 /// Words of a one-bit-per-cell mask of a grid.
 const MASK_WORDS: usize = GRID_CELLS.div_ceil(64);
+const _: () = assert!(MASK_WORDS.is_power_of_two() && MASK_WORDS * 64 == GRID_CELLS);
+/// A point off the grid in the paper's method.
+const OFF_GRID: u32 = u32::MAX;
+/// Points of one match the paper's method holds room for from the start: a circling
+/// gives a few hundred to a few thousand.
+const PAPER_POINTS_RESERVED: usize = 4096;
 
 /// Least number of points [`ShapeMatcher::match_points`] accepts.
 pub const MIN_MATCH_POINTS: usize = 8;
@@ -215,6 +222,13 @@ pub struct ShapeMatcher {
     /// Cells hit by the points at one trial rotation (paper's method), same layout, so
     /// that each cell counts once.
     hit: Vec<u64>,
+    /// The points about their centroid (paper's method), x and y apart.
+    rel_x: Vec<f64>,
+    rel_y: Vec<f64>,
+    /// The cell of each point at one trial rotation, or [`OFF_GRID`].
+    cells: Vec<u32>,
+    /// The vector build of the paper's method's inner loop.
+    simd: Simd,
     /// Scratch of the searches.
     trials: Vec<Trial>,
     refined: Vec<Trial>,
@@ -296,6 +310,10 @@ impl ShapeMatcher {
             nearest,
             mask,
             hit: vec![0; MASK_WORDS],
+            rel_x: Vec::with_capacity(PAPER_POINTS_RESERVED),
+            rel_y: Vec::with_capacity(PAPER_POINTS_RESERVED),
+            cells: Vec::with_capacity(PAPER_POINTS_RESERVED),
+            simd: Simd::detect(),
             trials: Vec::with_capacity(coarse.max(paper)),
             refined: Vec::with_capacity(config.candidates),
             cross: Mat::zeros(2, 2),
@@ -479,22 +497,35 @@ impl ShapeMatcher {
         // q = R(-theta) (p - centroid) + border_centroid, so to the cell coordinates
         // (R(-theta) inv_cell) (p - centroid) + centre, with no division per point.
         let centre = (self.border_centroid - self.geometry.origin_m()) * self.inv_cell;
-        let side = GRID_SIDE as f64;
+        // The points about their centroid, in columns (the rotation loop below then runs
+        // over plain arrays, which the compiler vectorises). The scratch grows only when a
+        // larger point set than any before arrives.
+        self.rel_x.clear();
+        self.rel_y.clear();
+        self.rel_x.extend(points.iter().map(|p| p.x - centroid.x));
+        self.rel_y.extend(points.iter().map(|p| p.y - centroid.y));
+        self.cells.resize(points.len(), OFF_GRID);
         for k in 0..n {
             let theta = k as f64 * TAU / n as f64;
             let to_cells = DVec2::from_angle(-theta) * self.inv_cell;
-            self.hit.fill(0);
-            let mut count = 0_u64;
-            for &p in points {
-                let c = to_cells.rotate(p - centroid) + centre;
-                if c.x >= 0.0 && c.y >= 0.0 && c.x < side && c.y < side {
-                    let cell = Grid::index(c.x as usize, c.y as usize);
-                    let (word, bit) = (cell / 64, cell % 64);
-                    // Counts the cell if it is in the mask and not yet hit; no branch.
-                    count += ((self.mask[word] & !self.hit[word]) >> bit) & 1;
-                    self.hit[word] |= 1 << bit;
-                }
+            // Pass 1, no branch: the cell of every point, or OFF_GRID.
+            let rotation = CellRotation { to_cells, centre };
+            match self.simd {
+                // SAFETY: `simd` says what the CPU reported.
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx512 => unsafe {
+                    cells_avx512(rotation, &self.rel_x, &self.rel_y, &mut self.cells);
+                },
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx2 => unsafe {
+                    cells_avx2(rotation, &self.rel_x, &self.rel_y, &mut self.cells);
+                },
+                _ => cells_body(rotation, &self.rel_x, &self.rel_y, &mut self.cells),
             }
+            // Pass 2: each cell of the mask counts once. The points of a circling come in
+            // order along the border, several to a cell: a repeat of the previous point's
+            // cell is skipped without touching memory.
+            let count = count_mask_cells(&self.cells, &self.mask, &mut self.hit);
             let t = centroid - DVec2::from_angle(theta).rotate(self.border_centroid);
             self.trials.push(Trial {
                 theta,
@@ -792,6 +823,76 @@ impl ShapeMatcher {
     }
 }
 
+/// How many distinct cells of `cells` (cell indices, or [`OFF_GRID`]) are set in `mask`;
+/// `hit` is scratch of the mask's size.
+fn count_mask_cells(cells: &[u32], mask: &[u64], hit: &mut [u64]) -> u64 {
+    let mask: &[u64; MASK_WORDS] = mask.try_into().expect("a mask of every cell");
+    let hit: &mut [u64; MASK_WORDS] = hit.try_into().expect("a hit set of every cell");
+    hit.fill(0);
+    let mut count = 0_u64;
+    let mut previous = OFF_GRID;
+    for &cell in cells {
+        // The points of a circling come in order along the border, several to a cell: a
+        // repeat of the previous point's cell is skipped without touching memory.
+        if cell == previous || cell == OFF_GRID {
+            continue;
+        }
+        previous = cell;
+        // Cell indices are below GRID_CELLS, so the word is below MASK_WORDS (a power of
+        // two): the mask only lets the compiler see it.
+        let (word, bit) = ((cell as usize / 64) & (MASK_WORDS - 1), cell % 64);
+        // Counts the cell if it is in the mask and not yet hit; no branch.
+        count += ((mask[word] & !hit[word]) >> bit) & 1;
+        hit[word] |= 1 << bit;
+    }
+    count
+}
+
+/// Maps points about their centroid to cell coordinates at one trial rotation:
+/// `to_cells.rotate(p) + centre`.
+#[derive(Clone, Copy)]
+struct CellRotation {
+    to_cells: DVec2,
+    centre: DVec2,
+}
+
+/// The index of the cell of each point (`rel_x[k]`, `rel_y[k]`) at `rotation`, or
+/// [`OFF_GRID`]: no branch, so that it vectorises.
+#[inline(always)]
+fn cells_body(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
+    let CellRotation { to_cells, centre } = rotation;
+    let side = GRID_SIDE as f64;
+    for ((cell, &x), &y) in cells.iter_mut().zip(rel_x).zip(rel_y) {
+        let cx = to_cells.x * x - to_cells.y * y + centre.x;
+        let cy = to_cells.y * x + to_cells.x * y + centre.y;
+        let inside = (cx >= 0.0) & (cy >= 0.0) & (cx < side) & (cy < side);
+        // Clamped first so that the truncation is a plain conversion; for a point on the
+        // grid the clamp changes nothing.
+        // SAFETY: the points and the rotation are finite (checked on entry), so the
+        // clamped values are finite and in [0, side - 1], which fits an i32.
+        let (i, j) = unsafe {
+            (
+                cx.clamp(0.0, side - 1.0).to_int_unchecked::<i32>(),
+                cy.clamp(0.0, side - 1.0).to_int_unchecked::<i32>(),
+            )
+        };
+        let index = (j * GRID_SIDE as i32 + i) as u32;
+        *cell = if inside { index } else { OFF_GRID };
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn cells_avx2(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
+    cells_body(rotation, rel_x, rel_y, cells);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+fn cells_avx512(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
+    cells_body(rotation, rel_x, rel_y, cells);
+}
+
 /// Distance between two angles modulo `period`, in `[0, period / 2]`.
 fn angle_distance(a: f64, b: f64, period: f64) -> f64 {
     let d = (a - b).rem_euclid(period);
@@ -924,4 +1025,43 @@ fn ridge_points(s: &Grid, threshold: f32) -> Vec<DVec2> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every vector build of the paper's method's cell loop this CPU runs gives the
+    /// baseline build's cells, on and off the grid.
+    #[test]
+    fn every_vector_build_finds_the_baseline_cells() {
+        let n = 1001;
+        let rel_x: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() * 0.4).collect();
+        let rel_y: Vec<f64> = (0..n).map(|k| (k as f64 * 0.23).cos() * 0.4).collect();
+        let rotation = CellRotation {
+            to_cells: DVec2::from_angle(-0.7) * 320.0,
+            centre: DVec2::splat(64.3),
+        };
+        let mut baseline = vec![0; n];
+        cells_body(rotation, &rel_x, &rel_y, &mut baseline);
+        let off = baseline.iter().filter(|&&c| c == OFF_GRID).count();
+        assert!(
+            off > 0 && off < n,
+            "some points on the grid and some off it"
+        );
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut cells = vec![0; n];
+            if Simd::detect() != Simd::Baseline {
+                // SAFETY: the CPU has AVX2 and FMA.
+                unsafe { cells_avx2(rotation, &rel_x, &rel_y, &mut cells) };
+                assert_eq!(cells, baseline, "AVX2");
+            }
+            if Simd::detect() == Simd::Avx512 {
+                // SAFETY: the CPU has AVX-512F and FMA.
+                unsafe { cells_avx512(rotation, &rel_x, &rel_y, &mut cells) };
+                assert_eq!(cells, baseline, "AVX-512");
+            }
+        }
+    }
 }
