@@ -4,12 +4,22 @@ use glam::DVec2;
 use crate::Grid;
 
 /// Least interpolated push weight (sum of unit-peak Gaussians) at a contact point for
-/// [`AffordanceGradient::predict`] to answer: about one trial 2.4 sigma away.
-pub const MIN_PREDICTION_EVIDENCE: f64 = 0.05;
+/// [`AffordanceGradient::predict`] to answer: about one trial 3.3 sigma (11 mm at the
+/// default 3.5 mm push sigma) away.
+pub const MIN_PREDICTION_EVIDENCE: f64 = 0.005;
 
 /// Fraction of the largest value of the combined shape gradient above which
 /// [`AffordanceGradient::contact_candidates`] takes a cell for the object's border.
 pub const CONTACT_BORDER_THRESHOLD: f32 = 0.3;
+
+/// Fraction of a normalised S's peak above which a band along a push's heading line is the
+/// object's border: where [`crate::border_crossing`] locates aim points, in learning (the
+/// estimator keys each trial by it) and in prediction alike. Lower than
+/// [`CONTACT_BORDER_THRESHOLD`]: a concave corner, which the IR sees only obliquely from
+/// outside, leaves a band of about a fifth of the peak (the L's inner corner); at 0.3 a
+/// push into it was keyed to the face behind, and the L's learned effects there mixed
+/// pushes from opposite sides (displacement error 0.26 of the displacement, 0.14 at 0.15).
+pub const AIM_BORDER_THRESHOLD: f32 = 0.15;
 
 /// Two alphas closer than this (degrees) are the same alpha.
 pub(crate) const ALPHA_EPS_DEG: f64 = 1e-6;

@@ -13,8 +13,8 @@ mod shape_matcher;
 mod simd;
 
 pub use affordance_gradient::{
-    AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE, Prediction,
-    UnknownAlphaError,
+    AIM_BORDER_THRESHOLD, AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE,
+    Prediction, UnknownAlphaError,
 };
 pub use affordance_learner::{
     AffordanceLearner, LearnerBuildError, LearnerConfig, PushOutcome, SampleAddError,

@@ -1,7 +1,7 @@
 use glam::DVec2;
 
 use crate::affordance_gradient::ALPHA_EPS_DEG;
-use crate::{AffordanceGradient, CONTACT_BORDER_THRESHOLD, Grid, Prediction};
+use crate::{AIM_BORDER_THRESHOLD, AffordanceGradient, Grid, Prediction};
 
 /// Predicts pushes of the learning protocol's family from an [`AffordanceGradient`]: pushes
 /// that start on the centroid-centred circle of radius `start_radius_m` (where the learning
@@ -88,7 +88,7 @@ impl<'a> PushPredictor<'a> {
         let to_centroid = (-start).to_angle();
         let aim = |alpha: f64| {
             let dir = DVec2::from_angle(to_centroid + alpha.to_radians());
-            border_crossing(&self.shape, start, dir, CONTACT_BORDER_THRESHOLD)
+            border_crossing(&self.shape, start, dir, AIM_BORDER_THRESHOLD)
         };
         let (Some(ca), Some(cb)) = (aim(a.alpha_deg), aim(b.alpha_deg)) else {
             return ag.predict(contact_point_obj, alpha_deg);

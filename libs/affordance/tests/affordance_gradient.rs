@@ -53,7 +53,7 @@ fn learned() -> AffordanceGradient {
 
 #[test]
 fn predictions_between_trials_match_the_analytic_model() {
-    // Tolerances: the Gaussian-weighted mean (push sigma 5 mm, trials 4.2 mm apart on the
+    // Tolerances: the Gaussian-weighted mean (push sigma 3.5 mm, trials 4.2 mm apart on the
     // circle) smooths the model along the border with a bias of about sigma^2 / 2 * f'':
     // 0.16 mm for the displacement (|f''| = 20 mm / R^2), 0.14 deg for the rotation. In alpha
     // the model's displacement turns along an arc that the linear interpolation cuts by
@@ -141,8 +141,9 @@ fn with_data_on_one_side_only_the_confidence_falls_with_the_alpha_distance() {
     let at0 = ag.predict(contact(0.0), 0.0).expect("on the trial");
     let at12 = ag.predict(contact(0.0), 12.0).expect("A0 still answers");
     // The contact (40, 0) mm lies 1 mm from the four nearest cell centres in x and in y,
-    // so the interpolated weight there is exp(-2 mm^2 / (2 * (5 mm)^2)).
-    let w = (-2.0_f64 / 50.0).exp();
+    // so the interpolated weight there is exp(-2 mm^2 / (2 sigma^2)).
+    let sigma_mm = LearnerConfig::default().push_sigma_m * 1e3;
+    let w = (-2.0_f64 / (2.0 * sigma_mm * sigma_mm)).exp();
     assert!(
         (at0.confidence - (1.0 - (-w).exp())).abs() < 1e-6,
         "{at0:?}"

@@ -44,6 +44,15 @@ pub enum PushPhase {
 /// IR samples over which a stalled gap is judged (5 samples = 78 ms at 64 Hz).
 const STALL_SAMPLES: usize = 5;
 
+/// Largest front gap (m) at which a gap that stops shrinking means contact. Beyond it the
+/// response table flattens (120 -> 104 raw from 50 to 60 mm, noise about 5 raw): a free
+/// approach no longer shows as a shrinking gap, and noise alone stopped approaches some
+/// 50 mm short of the object (a fifth of the L's unseen pushes then moved it less than
+/// 25 mm). The corner the rule exists for still shows within it: at 40 mm the triangle's
+/// head-on pushes went unnoticed and turned it 50 deg, at 45 its largest turn at alpha 0 is
+/// the paper's 39 deg again.
+const STALL_MAX_GAP: f64 = 0.045;
+
 /// The push as a state machine, fed one IR frame per control step.
 ///
 /// Contact is inferred from the IR alone (the paper's ObjInContact), in two ways: the front
@@ -82,6 +91,9 @@ impl PushRoutine {
         let (Some(now), Some(then)) = (self.gaps[0], self.gaps[STALL_SAMPLES]) else {
             return false;
         };
+        if now > STALL_MAX_GAP {
+            return false;
+        }
         let expected = self.settings.approach_speed * sample_period * STALL_SAMPLES as f64;
         // Within IR range a free approach closes the gap by `expected` (5 mm at 80 mm/s);
         // distance noise is about 1 mm at these ranges. Under a quarter of it: pushing.
@@ -138,5 +150,41 @@ impl PushRoutine {
             }
             PushPhase::Done { .. } => (0.0, 0.0),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use agp_world::RobotDescription;
+
+    use super::*;
+
+    /// Feeds `samples` IR frames at 64 Hz, every front ray reading a surface `gap` beyond
+    /// the shell (the gap standing still, as when the robot pushes or the reading is stuck),
+    /// and returns the phase reached.
+    fn still_gap(gap: f64, samples: u64) -> PushPhase {
+        let robot = RobotDescription::epuck();
+        let sense = ContactSense::new(&robot);
+        let mut raw = [0.0_f32; 8];
+        for (&i, inner) in robot.front_sensors().iter().zip(sense.inner_lengths()) {
+            raw[i] = robot.response.reading(gap + inner) as f32;
+        }
+        let period = 1.0 / sense.ir_rate_hz();
+        let mut routine = PushRoutine::new(PushSettings::default(), 0.0);
+        for k in 0..samples {
+            routine.update(&sense, k as f64 * period, k, &raw);
+        }
+        routine.phase()
+    }
+
+    #[test]
+    fn a_gap_that_stops_shrinking_close_by_is_contact() {
+        assert!(matches!(still_gap(0.02, 10), PushPhase::Push { .. }));
+    }
+
+    #[test]
+    fn a_gap_that_stands_still_far_out_is_not_contact() {
+        // Past 45 mm the response table is too flat to see the approach close the gap.
+        assert!(matches!(still_gap(0.05, 10), PushPhase::Approach { .. }));
     }
 }

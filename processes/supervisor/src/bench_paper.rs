@@ -151,14 +151,28 @@ fn print_comparison(doc: &Value, args: &BenchPaperArgs) {
         "    {:<10} {:>14} {:>18}",
         "object", "rotation deg", "displacement ratio"
     );
+    // A figure the JSON holds as null (a disc's rotation, which IR cannot see) as "n/a".
+    let fixed = |x: f64, decimals: usize| {
+        if x.is_finite() {
+            format!("{x:.decimals$}")
+        } else {
+            "n/a".to_owned()
+        }
+    };
     for object in LEARN_OBJECTS {
         println!(
-            "    {:<10} {:>14.2} {:>18.3}",
+            "    {:<10} {:>14} {:>18}",
             object,
-            num(learn, &[object, "prediction", "median_rotation_error_deg"]),
-            num(
-                learn,
-                &[object, "prediction", "median_displacement_error_ratio"]
+            fixed(
+                num(learn, &[object, "prediction", "median_rotation_error_deg"]),
+                2
+            ),
+            fixed(
+                num(
+                    learn,
+                    &[object, "prediction", "median_displacement_error_ratio"]
+                ),
+                3
             )
         );
     }
