@@ -198,7 +198,7 @@ impl Default for ProcessStatus {
 /// The supervisor's answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ControlResponse.v2")]
+#[type_name("agp::ControlResponse.v3")]
 pub struct ControlResponse {
     /// The [`ControlKind`] answered.
     pub kind: u32,
@@ -214,6 +214,10 @@ pub struct ControlResponse {
     pub handover_ns: u64,
     /// Why a request was refused (UTF-8, zero-padded).
     pub message: [u8; STATUS_PATH_LEN],
+    /// How the instance's processes wait for messages (`AGP_WAIT`, as
+    /// [`crate::WaitStrategy::name`] writes it), or `mixed` when launch.toml gives its
+    /// processes different ones (UTF-8, zero-padded).
+    pub waiting: [u8; STATUS_NAME_LEN],
     pub processes: [ProcessStatus; MAX_STATUS_PROCESSES],
 }
 
@@ -228,6 +232,7 @@ impl Default for ControlResponse {
             active_epoch: 0,
             handover_ns: 0,
             message: [0; STATUS_PATH_LEN],
+            waiting: [0; STATUS_NAME_LEN],
             processes: [ProcessStatus::default(); MAX_STATUS_PROCESSES],
         }
     }
@@ -238,7 +243,9 @@ const _: () = {
     assert!(core::mem::size_of::<ActiveEpoch>() == 16);
     assert!(core::mem::size_of::<ProcessStatus>() == 344);
     assert!(core::mem::align_of::<ProcessStatus>() == 8);
-    assert!(core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 344 * MAX_STATUS_PROCESSES);
+    assert!(
+        core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 32 + 344 * MAX_STATUS_PROCESSES
+    );
 };
 
 /// Which planner drives: physics applies only motor commands of this epoch. Published by

@@ -52,11 +52,44 @@ pub enum WaitStrategy {
 impl WaitStrategy {
     /// The strategy named in `AGP_WAIT` (`spin`, `yield`, `block`, `spin-then-block` with an
     /// optional `:<microseconds>`), or the default.
+    /// A value that names none is said on stderr and the default is used: `agp up` refuses
+    /// such a value before anything starts ([`WaitStrategy::from_env_checked`]).
     pub fn from_env() -> Self {
-        std::env::var("AGP_WAIT")
-            .ok()
-            .and_then(|v| Self::parse(&v))
-            .unwrap_or_default()
+        match Self::from_env_checked() {
+            Ok(strategy) => strategy.unwrap_or_default(),
+            Err(why) => {
+                let default = Self::default();
+                eprintln!("{why}: waiting `{}`", default.name());
+                default
+            }
+        }
+    }
+
+    /// The environment variable that names the strategy.
+    pub const ENV: &'static str = "AGP_WAIT";
+
+    /// What [`WaitStrategy::ENV`] may hold, for messages.
+    pub const EXPECTED: &'static str =
+        "`spin`, `yield`, `block` or `spin-then-block[:<microseconds>]`";
+
+    /// The strategy `AGP_WAIT` names; `Ok(None)` when it is unset, an error that names the
+    /// value when it names no strategy.
+    pub fn from_env_checked() -> Result<Option<Self>, String> {
+        match std::env::var(Self::ENV) {
+            Err(std::env::VarError::NotPresent) => Ok(None),
+            Err(std::env::VarError::NotUnicode(v)) => Err(format!(
+                "{}={v:?} is not a waiting strategy ({})",
+                Self::ENV,
+                Self::EXPECTED
+            )),
+            Ok(v) => Self::parse(&v).map(Some).ok_or_else(|| {
+                format!(
+                    "{}=`{v}` is not a waiting strategy ({})",
+                    Self::ENV,
+                    Self::EXPECTED
+                )
+            }),
+        }
     }
 
     /// Parses a strategy name.

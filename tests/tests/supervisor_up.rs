@@ -449,3 +449,37 @@ fn a_launch_file_that_is_not_toml_is_refused_before_anything_starts() {
     let text = launch(name, &child("job", OK_CHILD, "ends_run = yes"));
     assert_refused(name, &text, Some(11), "");
 }
+
+#[test]
+fn a_launch_file_with_a_bad_waiting_strategy_is_refused_before_anything_starts() {
+    let name = "t-bad-wait";
+    let text = launch(
+        name,
+        &child("job", OK_CHILD, "env = { AGP_WAIT = \"fast\" }"),
+    );
+    assert_refused(name, &text, Some(11), "not a waiting strategy");
+}
+
+#[test]
+fn a_bad_waiting_strategy_in_the_environment_is_refused_before_anything_starts() {
+    let name = "t-bad-wait-env";
+    let dir = LaunchDir::new(&launch(name, &child("job", OK_CHILD, "")));
+    let run = std::process::Command::new(agp_tests::bin_path("agp"))
+        .arg("up")
+        .current_dir(dir.path())
+        .env("AGP_WAIT", "spin-then-block:soon")
+        .output()
+        .expect("run agp up");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("AGP_WAIT=`spin-then-block:soon` is not a waiting strategy"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("nothing was started"), "{stderr}");
+    assert!(
+        !dir.results().exists(),
+        "a refused run created its results folder"
+    );
+    assert_eq!(count_instance_files(name), 0);
+}

@@ -97,6 +97,8 @@ pub struct StatusReport {
     pub uptime_s: f64,
     /// The epoch of the planner that drives.
     pub active_epoch: u64,
+    /// How the processes wait for messages (`AGP_WAIT`), or `mixed`.
+    pub waiting: String,
     pub processes: Vec<ProcessReport>,
 }
 
@@ -108,6 +110,7 @@ impl StatusReport {
             supervisor_pid: r.supervisor_pid,
             uptime_s: r.uptime_ms as f64 * 1e-3,
             active_epoch: r.active_epoch,
+            waiting: read_str(&r.waiting),
             processes: r.processes[..count]
                 .iter()
                 .map(|p| ProcessReport {
@@ -132,8 +135,8 @@ impl StatusReport {
 
     pub fn print(&self) {
         println!(
-            "instance `{}`: supervisor pid {}, up {:.1} s, active planner epoch {}",
-            self.instance, self.supervisor_pid, self.uptime_s, self.active_epoch
+            "instance `{}`: supervisor pid {}, up {:.1} s, active planner epoch {}, waiting `{}`",
+            self.instance, self.supervisor_pid, self.uptime_s, self.active_epoch, self.waiting
         );
         let width = self
             .processes

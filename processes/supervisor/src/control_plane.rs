@@ -79,6 +79,8 @@ pub(crate) struct ControlPlane {
     seq: u64,
     swap: Option<Swap>,
     retiring: Vec<Retiring>,
+    /// How the instance's processes wait, for status replies.
+    waiting: String,
     /// `None` when the streams could not be opened (then `agp status` shows no rates).
     rates: Option<MessageRates>,
 }
@@ -89,7 +91,14 @@ fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Erro
 
 impl ControlPlane {
     /// Creates the control service and publishes epoch 0 (the launch file's processes).
-    pub(crate) fn open(instance: &Instance, node: &Node<ipc::Service>, log: &Log) -> Result<Self> {
+    /// `waiting` is how the instance's processes wait ([`LaunchConfig::waiting`]), which
+    /// every status reply carries.
+    pub(crate) fn open(
+        instance: &Instance,
+        node: &Node<ipc::Service>,
+        log: &Log,
+        waiting: &str,
+    ) -> Result<Self> {
         let service = instance.create_control(node)?;
         let server = service
             .server_builder()
@@ -117,6 +126,7 @@ impl ControlPlane {
             seq: 0,
             swap: None,
             retiring: Vec::new(),
+            waiting: waiting.to_owned(),
             rates: match MessageRates::open(instance, node) {
                 Ok(r) => Some(r),
                 Err(e) => {
@@ -228,6 +238,7 @@ impl ControlPlane {
         if let Err(why) = &result {
             write_str(&mut response.message, why);
         }
+        write_str(&mut response.waiting, &self.waiting);
         fill_status(slots, self.rates.as_ref(), &mut response);
         if let Err(e) = request.send_copy(response) {
             log.note(format_args!("control service: cannot answer: {e:?}"));

@@ -28,7 +28,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use agp_shared_types::{Instance, InstanceNameError, ROOT_ENV};
+use agp_shared_types::{Instance, InstanceNameError, ROOT_ENV, WaitStrategy};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -531,6 +531,27 @@ impl LaunchConfig {
         })
     }
 
+    /// How the processes wait for messages: each one's `AGP_WAIT` from its `env`, else
+    /// the supervisor's own (`inherited`), else the default; `mixed` when they differ.
+    pub fn waiting(&self, inherited: Option<WaitStrategy>) -> String {
+        let mut names = self.processes.iter().map(|p| {
+            p.env
+                .get(WaitStrategy::ENV)
+                .and_then(|v| WaitStrategy::parse(v))
+                .or(inherited)
+                .unwrap_or_default()
+                .name()
+        });
+        let first = names
+            .next()
+            .unwrap_or_else(|| inherited.unwrap_or_default().name());
+        if names.all(|n| n == first) {
+            first
+        } else {
+            "mixed".to_owned()
+        }
+    }
+
     /// The context every child gets as environment variables (on top of the supervisor's
     /// own environment and the process's `env`): `AGP_INSTANCE`, `AGP_SCENARIO`,
     /// `AGP_CLOCK`, `AGP_RATE_HZ`, `AGP_RESULTS`, `AGP_PROCESS`.
@@ -636,6 +657,10 @@ fn resolve_process(
             Some("not a variable name")
         } else if value.contains('\0') {
             Some("the value holds a NUL byte")
+        } else if k == WaitStrategy::ENV && WaitStrategy::parse(value).is_none() {
+            Some(
+                "not a waiting strategy: `spin`, `yield`, `block` or `spin-then-block[:<microseconds>]`",
+            )
         } else {
             None
         };
@@ -1055,6 +1080,29 @@ stop_grace_ms = 500
         let (line, _, kind) = fx.fault(&GOOD.replace("RUST_LOG", "AGP_INSTANCE"));
         assert_eq!(line, Some(13));
         assert!(matches!(kind, LaunchFaultKind::BadEnv { .. }));
+    }
+
+    #[test]
+    fn a_waiting_strategy_that_names_none_is_refused_with_its_line() {
+        let fx = Fixture::new();
+        let text = GOOD.replace("RUST_LOG = \"info\"", "AGP_WAIT = \"fast\"");
+        let (line, message, kind) = fx.fault(&text);
+        assert_eq!(line, Some(13));
+        assert!(matches!(kind, LaunchFaultKind::BadEnv { .. }));
+        assert!(message.contains("not a waiting strategy"), "{message}");
+    }
+
+    #[test]
+    fn the_instance_waits_as_its_processes_do_or_is_mixed() {
+        let fx = Fixture::new();
+        let config = fx.parse(GOOD).expect("valid");
+        assert_eq!(config.waiting(None), WaitStrategy::default().name());
+        assert_eq!(config.waiting(Some(WaitStrategy::Block)), "block");
+        let one = fx
+            .parse(&GOOD.replace("RUST_LOG = \"info\"", "AGP_WAIT = \"yield\""))
+            .expect("valid");
+        assert_eq!(one.waiting(Some(WaitStrategy::Yield)), "yield");
+        assert_eq!(one.waiting(Some(WaitStrategy::Block)), "mixed");
     }
 
     #[test]

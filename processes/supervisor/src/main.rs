@@ -193,6 +193,13 @@ enum ProbeCmd {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if matches!(cli.command, Cmd::Status(_) | Cmd::Down(_) | Cmd::Swap(_)) {
+        // A reader that stops early (`agp status | head -1`) ends these quickly-done
+        // commands quietly, as it ends `ls`. The others own children and shared memory to
+        // clean up, and keep Rust's default (a write error instead of the signal).
+        // SAFETY: signal(2) restoring a default disposition, before any thread exists.
+        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+    }
     let result = match &cli.command {
         Cmd::Up(args) => up(args),
         Cmd::Status(args) => status(args),
@@ -229,6 +236,12 @@ fn main() -> ExitCode {
 }
 
 fn up(args: &UpArgs) -> Result<u8> {
+    // Every child inherits it: a value that names no strategy is refused here, not guessed.
+    if let Err(why) = agp_shared_types::WaitStrategy::from_env_checked() {
+        eprintln!("agp: error: {why}");
+        eprintln!("agp: nothing was started");
+        return Ok(2);
+    }
     let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
     let options = LaunchOptions {
         instance: args.instance.clone(),

@@ -19,8 +19,9 @@
 //! delivering each frame to one more subscriber.
 //!
 //! After the sampling, it measures the floor: a bare iceoryx2 ping-pong between `agp` and
-//! a copy of itself (`agp profile-floor-pong`), waiting as the pipeline waits (`AGP_WAIT`,
-//! [`WaitStrategy::from_env`]) and notifying after every send as the pipeline does. While
+//! a copy of itself (`agp profile-floor-pong`), waiting as the pipeline waits (the
+//! supervisor reports its `AGP_WAIT`; the profiler's own is not used) and notifying after
+//! every send as the pipeline does. While
 //! the floor runs, the instance's processes are paused (SIGSTOP, then SIGCONT, also on an
 //! error or Ctrl-C), so the floor has the machine as the pipeline had it: on two cores a
 //! running pipeline would otherwise compete with the floor it is compared to. A lockstep
@@ -438,7 +439,7 @@ struct FloorPorts {
 }
 
 impl FloorPorts {
-    fn open(node: &Node<ipc::Service>, ping_side: bool) -> Result<Self> {
+    fn open(node: &Node<ipc::Service>, ping_side: bool, waiting: WaitStrategy) -> Result<Self> {
         let topic =
             |name: &str| -> Result<publish_subscribe::PortFactory<ipc::Service, FloorMessage, ()>> {
                 let service: ServiceName = name
@@ -490,7 +491,7 @@ impl FloorPorts {
                 .notifier_builder()
                 .create()
                 .map_err(|e| anyhow!("cannot create the floor's notifier: {e:?}"))?,
-            waiter: Waiter::new(listener, WaitStrategy::from_env()),
+            waiter: Waiter::new(listener, waiting),
             _services: (ping, pong, ping_ev, pong_ev),
         })
     }
@@ -581,7 +582,29 @@ impl Drop for Paused {
 
 /// The ping side: starts the pong side, measures for `seconds`, stops it, removes the
 /// floor's files.
-fn run_floor(seconds: f64) -> Result<Floor> {
+/// How the processes of instance `name` wait, as its supervisor reports it: the floor must
+/// wait the same way. An `AGP_WAIT` of the caller's that differs is said and not used.
+fn pipeline_waiting(name: &str) -> Result<WaitStrategy> {
+    let r = control::ask(name, agp_shared_types::ControlKind::Status)?;
+    let reported = control::StatusReport::new(name, &r).waiting;
+    let Some(waiting) = WaitStrategy::parse(&reported) else {
+        bail!(
+            "the processes of instance `{name}` wait in different ways (`{reported}`: launch.toml sets `AGP_WAIT` for some of them): the floor needs one way to compare with; give them all the same"
+        );
+    };
+    if let Ok(Some(own)) = WaitStrategy::from_env_checked()
+        && own != waiting
+    {
+        eprintln!(
+            "agp profile: the floor waits as instance `{name}` does, `{}`; AGP_WAIT=`{}` here is not used",
+            waiting.name(),
+            own.name()
+        );
+    }
+    Ok(waiting)
+}
+
+fn run_floor(seconds: f64, waiting: WaitStrategy) -> Result<Floor> {
     let name = format!("pfloor-{}", std::process::id());
     let instance =
         Instance::new(&name).map_err(|e| anyhow!("bad floor instance name `{name}`: {e}"))?;
@@ -590,10 +613,11 @@ fn run_floor(seconds: f64) -> Result<Floor> {
         let node = instance
             .node("floor-ping", false)
             .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
-        let ports = FloorPorts::open(&node, true)?;
+        let ports = FloorPorts::open(&node, true, waiting)?;
         let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
         let child = Command::new(exe)
             .args([FLOOR_PONG_SUBCOMMAND, "--instance", &name])
+            .env(WaitStrategy::ENV, waiting.name())
             .stdin(Stdio::null())
             .spawn()
             .context("cannot start the floor's pong side")?;
@@ -662,7 +686,7 @@ pub fn run_floor_pong(args: &FloorPongArgs) -> Result<u8> {
     let node = instance
         .node("floor-pong", false)
         .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
-    let ports = FloorPorts::open(&node, false)?;
+    let ports = FloorPorts::open(&node, false, WaitStrategy::from_env())?;
     ports.send(FLOOR_READY, monotonic_ns())?;
     loop {
         let (seq, stamp) = ports.next()?;
@@ -701,7 +725,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");
     }
     install_shutdown_handler();
-    let waiting = WaitStrategy::from_env();
+    let waiting = pipeline_waiting(&name)?;
     let sampling = sample_pipeline(&instance, args.seconds)?;
     if shutdown_requested() {
         bail!("interrupted");
@@ -725,7 +749,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         } else {
             Some(Paused::pipeline(&name).context("cannot pause the pipeline for the floor")?)
         };
-        let floor = run_floor(args.floor_seconds).context("the floor failed");
+        let floor = run_floor(args.floor_seconds, waiting).context("the floor failed");
         let paused_processes = paused.as_ref().map(|p| p.pids.len());
         drop(paused);
         (floor?, paused_processes)

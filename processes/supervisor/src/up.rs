@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use agp_shared_types::{
     GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
+    WaitStrategy,
 };
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
@@ -183,7 +184,8 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         }
     };
 
-    let mut control = match ControlPlane::open(&instance, &node, &log) {
+    let waiting = config.waiting(WaitStrategy::from_env_checked().ok().flatten());
+    let mut control = match ControlPlane::open(&instance, &node, &log, &waiting) {
         Ok(c) => c,
         Err(e) => {
             drop(services);
