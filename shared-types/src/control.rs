@@ -316,6 +316,17 @@ impl Instance {
             .map_err(|e| ControlOpenError::Create(format!("{e:?}")))
     }
 
+    /// Whether the supervisor has created the control service, asked without a node: a
+    /// client that made one before the supervisor has cleaned the instance's leftovers
+    /// would be a stranger it must wait for.
+    pub fn control_exists(&self) -> bool {
+        let Ok(name) = ServiceName::new(CONTROL_SERVICE) else {
+            return false;
+        };
+        ipc::Service::does_exist(&name, self.config(), MessagingPattern::RequestResponse)
+            .unwrap_or(false)
+    }
+
     /// Opens the control service of a running supervisor (a client).
     pub fn open_control(
         &self,

@@ -65,6 +65,11 @@ pub fn ask_with(name: &str, request: ControlRequest, timeout: Duration) -> Resul
     if !is_up(&instance) {
         bail!("instance `{name}` is not up (no supervisor holds it)");
     }
+    // Until then the supervisor is still starting (it may be cleaning what a previous run
+    // left): a node of ours would be a stranger in its way.
+    if !instance.control_exists() {
+        bail!("instance `{name}` is starting: its supervisor does not answer yet");
+    }
     let node = instance
         .node(&format!("agp-cli-{}", std::process::id()), false)
         .map_err(|e| anyhow!("cannot create an iceoryx2 node on instance `{name}`: {e:?}"))?;
