@@ -68,27 +68,21 @@ impl WaitStrategy {
     /// The environment variable that names the strategy.
     pub const ENV: &'static str = "AGP_WAIT";
 
-    /// What [`WaitStrategy::ENV`] may hold, for messages.
-    pub const EXPECTED: &'static str =
-        "`spin`, `yield`, `block` or `spin-then-block[:<microseconds>]`";
+    /// Why a value of [`WaitStrategy::ENV`] is refused, and what it may hold.
+    pub const NOT_A_STRATEGY: &'static str =
+        "not a waiting strategy: `spin`, `yield`, `block` or `spin-then-block[:<microseconds>]`";
 
     /// The strategy `AGP_WAIT` names; `Ok(None)` when it is unset, an error that names the
     /// value when it names no strategy.
     pub fn from_env_checked() -> Result<Option<Self>, String> {
         match std::env::var(Self::ENV) {
             Err(std::env::VarError::NotPresent) => Ok(None),
-            Err(std::env::VarError::NotUnicode(v)) => Err(format!(
-                "{}={v:?} is not a waiting strategy ({})",
-                Self::ENV,
-                Self::EXPECTED
-            )),
-            Ok(v) => Self::parse(&v).map(Some).ok_or_else(|| {
-                format!(
-                    "{}=`{v}` is not a waiting strategy ({})",
-                    Self::ENV,
-                    Self::EXPECTED
-                )
-            }),
+            Err(std::env::VarError::NotUnicode(v)) => {
+                Err(format!("{}={v:?} is {}", Self::ENV, Self::NOT_A_STRATEGY))
+            }
+            Ok(v) => Self::parse(&v)
+                .map(Some)
+                .ok_or_else(|| format!("{}=`{v}` is {}", Self::ENV, Self::NOT_A_STRATEGY)),
         }
     }
 

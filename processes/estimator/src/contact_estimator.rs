@@ -1,4 +1,4 @@
-use agp_affordance::{Grid, border_crossing};
+use agp_affordance::{AIM_BORDER_THRESHOLD, Grid, border_crossing};
 use agp_world::{Pose, RobotDescription, border_range, ir_point_robot, to_frame};
 use glam::DVec2;
 
@@ -7,10 +7,10 @@ use glam::DVec2;
 pub struct LearnedShape<'a> {
     /// Ridge points of S (e.g. [`agp_affordance::ShapeMatcher::border_points`]), metres.
     pub border: &'a [DVec2],
-    /// S normalised to [0, 1] (e.g. [`agp_affordance::AffordanceGradient::combined_shape`]).
+    /// S normalised to [0, 1] (e.g. [`agp_affordance::AffordanceGradient::combined_shape`]);
+    /// aim points are located on it at [`AIM_BORDER_THRESHOLD`], as the predictor locates
+    /// them.
     pub shape: &'a Grid,
-    /// Value of `shape` above which a cell is the border (the matcher's ridge threshold).
-    pub threshold: f32,
 }
 
 /// How the contact point of a push is estimated at the moment contact is inferred from IR.
@@ -125,7 +125,7 @@ impl ContactEstimator {
                 learned.shape,
                 robot_obj.position(),
                 DVec2::from_angle(robot_obj.theta),
-                learned.threshold,
+                AIM_BORDER_THRESHOLD,
             ),
             robot_obj,
         }
@@ -199,11 +199,7 @@ mod tests {
     }
 
     fn learned<'a>(border: &'a [DVec2], shape: &'a Grid) -> LearnedShape<'a> {
-        LearnedShape {
-            border,
-            shape,
-            threshold: 0.3,
-        }
+        LearnedShape { border, shape }
     }
 
     #[test]

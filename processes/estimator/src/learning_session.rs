@@ -1,6 +1,6 @@
 use agp_affordance::{
-    AIM_BORDER_THRESHOLD, AffordanceGradient, AffordanceLearner, Grid, LearnerBuildError,
-    LearnerConfig, SampleAddError, ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
+    AffordanceGradient, AffordanceLearner, Grid, LearnerBuildError, LearnerConfig, SampleAddError,
+    ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
 };
 use agp_world::{Pose, RobotDescription};
 use glam::DVec2;
@@ -312,7 +312,6 @@ impl LearningSession {
                 LearnedShape {
                     border: m.border_points(),
                     shape,
-                    threshold: AIM_BORDER_THRESHOLD,
                 },
             ),
             _ => Err(TrialOrderError {
@@ -389,7 +388,6 @@ impl LearningSession {
             LearnedShape {
                 border: m.border_points(),
                 shape,
-                threshold: AIM_BORDER_THRESHOLD,
             },
         ))
     }

@@ -658,9 +658,7 @@ fn resolve_process(
         } else if value.contains('\0') {
             Some("the value holds a NUL byte")
         } else if k == WaitStrategy::ENV && WaitStrategy::parse(value).is_none() {
-            Some(
-                "not a waiting strategy: `spin`, `yield`, `block` or `spin-then-block[:<microseconds>]`",
-            )
+            Some(WaitStrategy::NOT_A_STRATEGY)
         } else {
             None
         };
