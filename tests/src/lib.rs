@@ -7,6 +7,8 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use agp_shared_types::Instance;
+use agp_world::Scenario;
+use serde_json::Value;
 
 /// The binary `name` of the workspace in the test's own target folder
 /// (`target/debug/deps/<test>` -> `target/debug/<name>`). The README's test command builds
@@ -496,4 +498,50 @@ pub fn pid_in(line: &str) -> Option<u32> {
     line.rsplit_once("pid ")
         .and_then(|(_, rest)| rest.split_whitespace().next())
         .and_then(|n| n.parse().ok())
+}
+
+/// `agp status --instance <name> --json` run in `dir` (at most `timeout`, a safety net),
+/// parsed; panics if it fails.
+#[track_caller]
+pub fn status_json(dir: &Path, name: &str, timeout: Duration) -> Value {
+    let run = run_agp(dir, &["status", "--instance", name, "--json"], timeout);
+    assert!(run.status.success(), "{}", run.stderr);
+    serde_json::from_str(&run.stdout).expect("`agp status --json` prints JSON")
+}
+
+/// The entry of process `name` in a parsed status, or `Null` when it is not listed.
+pub fn status_entry<'a>(status: &'a Value, name: &str) -> &'a Value {
+    status["processes"]
+        .as_array()
+        .and_then(|a| a.iter().find(|p| p["name"] == name))
+        .unwrap_or(&Value::Null)
+}
+
+/// The verdict `agp up` wrote for the placement run of instance `instance` into
+/// `results`, checked: success, and both errors within the tolerance of the built-in
+/// scenario `scenario`. `stdout` (the run's) goes into the failure message. Returns the
+/// final errors, mm and deg.
+#[track_caller]
+pub fn assert_placed(results: &Path, instance: &str, scenario: &str, stdout: &str) -> (f64, f64) {
+    let verdict_path = results.join(format!("{instance}-place.json"));
+    let verdict: Value = serde_json::from_str(
+        &std::fs::read_to_string(&verdict_path)
+            .unwrap_or_else(|e| panic!("no verdict at {}: {e}", verdict_path.display())),
+    )
+    .expect("JSON");
+    let task = Scenario::resolve(scenario).expect("the built-in").task;
+    let (mm, deg) = (
+        verdict["position_error_mm"]
+            .as_f64()
+            .expect("position error"),
+        verdict["orientation_error_deg"]
+            .as_f64()
+            .expect("orientation error"),
+    );
+    assert_eq!(verdict["success"], true, "{verdict}\n{stdout}");
+    assert!(
+        mm <= task.tolerance_m * 1e3 && deg <= task.tolerance_rad.to_degrees(),
+        "final error {mm:.1} mm, {deg:.1} deg beyond the tolerance: {verdict}"
+    );
+    (mm, deg)
 }

@@ -12,8 +12,10 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use agp_tests::{AgpUp, LaunchDir, StepLog, count_instance_files, learned_ag, run_agp};
-use agp_world::Scenario;
+use agp_tests::{
+    AgpUp, LaunchDir, StepLog, assert_placed, count_instance_files, learned_ag, status_entry,
+    status_json,
+};
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -42,16 +44,14 @@ fn steps(dir: &Path) -> Vec<u64> {
 }
 
 fn status(dir: &Path, name: &str) -> Value {
-    let run = run_agp(dir, &["status", "--instance", name, "--json"], TIMEOUT);
-    assert!(run.status.success(), "{}", run.stderr);
-    serde_json::from_str(&run.stdout).expect("JSON")
+    status_json(dir, name, TIMEOUT)
 }
 
+#[track_caller]
 fn process<'a>(status: &'a Value, name: &str) -> &'a Value {
-    status["processes"]
-        .as_array()
-        .and_then(|a| a.iter().find(|p| p["name"] == name))
-        .expect("the process is listed")
+    let entry = status_entry(status, name);
+    assert!(!entry.is_null(), "process `{name}` is not listed: {status}");
+    entry
 }
 
 /// Polls (the outcome, not the time it takes) until `ok`; returns when it held.
@@ -220,26 +220,7 @@ fn each_child_killed_hard_during_a_placement_is_restarted_and_the_object_still_r
         0,
         "files of `{name}` remain ({files_before} before the run)"
     );
-    let verdict_path = dir.results().join(format!("{name}-place.json"));
-    let verdict: Value = serde_json::from_str(
-        &std::fs::read_to_string(&verdict_path)
-            .unwrap_or_else(|e| panic!("no verdict at {}: {e}", verdict_path.display())),
-    )
-    .expect("JSON");
-    let task = Scenario::resolve("triangle").expect("the built-in").task;
-    let (mm, deg) = (
-        verdict["position_error_mm"]
-            .as_f64()
-            .expect("position error"),
-        verdict["orientation_error_deg"]
-            .as_f64()
-            .expect("orientation error"),
-    );
-    assert_eq!(verdict["success"], true, "{verdict}\n{}", end.stdout);
-    assert!(
-        mm <= task.tolerance_m * 1e3 && deg <= task.tolerance_rad.to_degrees(),
-        "final error {mm:.1} mm, {deg:.1} deg beyond the tolerance: {verdict}"
-    );
+    let (mm, deg) = assert_placed(&dir.results(), name, "triangle", &end.stdout);
     // The new world counts from step 0 and, stopped cleanly, logged every step it applied.
     // (The killed physics lost what its log buffer held, and may have left half a line that
     // the new one's first line completes: the new world starts where the steps went back,

@@ -8,10 +8,9 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agp_tests::{
-    AgpUp, DownOnPanic, LaunchDir, StepLog, bin_path, count_instance_files, learned_ag,
-    process_is_gone, run_agp,
+    AgpUp, DownOnPanic, LaunchDir, StepLog, assert_placed, bin_path, count_instance_files,
+    learned_ag, process_is_gone, run_agp, status_entry, status_json,
 };
-use agp_world::Scenario;
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -68,9 +67,7 @@ fn assert_every_step_applied_once(log: &[(u64, u64)]) {
 fn status_until(dir: &Path, name: &str, ok: impl Fn(&Value) -> bool) -> Value {
     let deadline = std::time::Instant::now() + TIMEOUT;
     loop {
-        let run = run_agp(dir, &["status", "--instance", name, "--json"], TIMEOUT);
-        assert!(run.status.success(), "{}", run.stderr);
-        let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
+        let v = status_json(dir, name, TIMEOUT);
         if ok(&v) {
             return v;
         }
@@ -80,14 +77,6 @@ fn status_until(dir: &Path, name: &str, ok: impl Fn(&Value) -> bool) -> Value {
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-}
-
-/// The status entry of process `name`.
-fn entry<'a>(status: &'a Value, name: &str) -> &'a Value {
-    status["processes"]
-        .as_array()
-        .and_then(|a| a.iter().find(|p| p["name"] == name))
-        .unwrap_or(&Value::Null)
 }
 
 /// Puts a copy of `from` at `to` the way a build does: a new file renamed into place.
@@ -104,14 +93,21 @@ fn swap(dir: &Path, name: &str, extra: &[&str]) -> agp_tests::Finished {
     run_agp(dir, &args, TIMEOUT)
 }
 
+/// Checks the JSON of swap `k` (`swap_stdout`): epoch `k`, by a planner not seen before;
+/// records its handover time (us) and pid.
+#[track_caller]
+fn record_swap(k: u64, swap_stdout: &str, handovers: &mut Vec<f64>, pids: &mut Vec<u32>) {
+    let v: Value = serde_json::from_str(swap_stdout).expect("JSON");
+    assert_eq!(v["epoch"], k, "{v}");
+    handovers.push(v["handover_us"].as_f64().expect("handover"));
+    let pid = u32::try_from(v["pid"].as_u64().expect("pid")).expect("pid");
+    assert!(!pids.contains(&pid), "swap {k} did not start a new planner");
+    pids.push(pid);
+}
+
 fn planner_pid(dir: &Path, name: &str) -> u32 {
-    let run = run_agp(dir, &["status", "--instance", name, "--json"], TIMEOUT);
-    assert!(run.status.success(), "{}", run.stderr);
-    let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
-    v["processes"]
-        .as_array()
-        .and_then(|a| a.iter().find(|p| p["name"] == "planner"))
-        .and_then(|p| p["pid"].as_u64())
+    status_entry(&status_json(dir, name, TIMEOUT), "planner")["pid"]
+        .as_u64()
         .and_then(|p| u32::try_from(p).ok())
         .expect("the planner runs")
 }
@@ -139,27 +135,25 @@ fn twenty_swaps_in_lockstep_lose_no_step_and_apply_none_twice() {
         // The swap's own deadline is a safety net too: the check is the step log.
         let run = swap(dir.path(), name, &["--timeout-s", "30"]);
         assert!(run.status.success(), "swap {k} failed: {}", run.stderr);
-        let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
-        assert_eq!(v["epoch"], k, "{v}");
-        handovers.push(v["handover_us"].as_f64().expect("handover"));
-        let pid = u32::try_from(v["pid"].as_u64().expect("pid")).expect("pid");
-        assert!(!pids.contains(&pid), "swap {k} did not start a new planner");
-        pids.push(pid);
+        record_swap(k, &run.stdout, &mut handovers, &mut pids);
     }
     // The status shows who drives, at which epoch, and the streams' rates (lockstep: one
     // command per frame).
     let status = status_until(dir.path(), name, |s| {
-        entry(s, "planner")["rate_per_s"].as_f64() > Some(0.0)
-            && entry(s, "physics")["rate_per_s"].as_f64() > Some(0.0)
+        status_entry(s, "planner")["rate_per_s"].as_f64() > Some(0.0)
+            && status_entry(s, "physics")["rate_per_s"].as_f64() > Some(0.0)
     });
     assert_eq!(status["active_epoch"], 20, "{status}");
-    assert_eq!(entry(&status, "planner")["epoch"], 20, "{status}");
-    assert_eq!(entry(&status, "planner")["rate_topic"], "motor_commands");
-    assert_eq!(entry(&status, "physics")["rate_topic"], "ir_frames");
+    assert_eq!(status_entry(&status, "planner")["epoch"], 20, "{status}");
+    assert_eq!(
+        status_entry(&status, "planner")["rate_topic"],
+        "motor_commands"
+    );
+    assert_eq!(status_entry(&status, "physics")["rate_topic"], "ir_frames");
     println!(
         "status: physics {} IR frames/s, planner {} motor commands/s",
-        entry(&status, "physics")["rate_per_s"],
-        entry(&status, "planner")["rate_per_s"]
+        status_entry(&status, "physics")["rate_per_s"],
+        status_entry(&status, "planner")["rate_per_s"]
     );
     let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
     assert!(down.status.success(), "{}", down.stderr);
@@ -273,7 +267,7 @@ fn watch_swaps_in_each_new_build_and_rolls_back_one_that_dies() {
     watch.wait_for_lines("\"epoch\":1,", 1, TIMEOUT);
     install(&bin_path("agp-planner"), &build);
     watch.wait_for_lines("\"epoch\":2,", 1, TIMEOUT);
-    let driving = entry(&status_until(dir.path(), name, |_| true), "planner")["pid"].clone();
+    let driving = status_entry(&status_until(dir.path(), name, |_| true), "planner")["pid"].clone();
 
     // A broken build (here an executable that refuses the planner's arguments and exits):
     // refused, and the planner of epoch 2 drives on.
@@ -282,7 +276,7 @@ fn watch_swaps_in_each_new_build_and_rolls_back_one_that_dies() {
     assert!(refused[0].contains("before it drove"), "{}", refused[0]);
     let status = status_until(dir.path(), name, |_| true);
     assert_eq!(status["active_epoch"], 2, "{status}");
-    assert_eq!(entry(&status, "planner")["pid"], driving, "{status}");
+    assert_eq!(status_entry(&status, "planner")["pid"], driving, "{status}");
 
     // The fixed build goes in (epoch 3 went to the refused one).
     install(&bin_path("agp-planner"), &build);
@@ -364,12 +358,7 @@ fn twenty_swaps_during_a_placement_keep_every_step_and_the_object_still_reaches_
                 run.stdout, run.stderr, end.status, end.stdout, end.stderr
             );
         }
-        let v: Value = serde_json::from_str(&run.stdout).expect("JSON");
-        assert_eq!(v["epoch"], k, "{v}");
-        handovers.push(v["handover_us"].as_f64().expect("handover"));
-        let pid = u32::try_from(v["pid"].as_u64().expect("pid")).expect("pid");
-        assert!(!pids.contains(&pid), "swap {k} did not start a new planner");
-        pids.push(pid);
+        record_swap(k, &run.stdout, &mut handovers, &mut pids);
         up.until(&format!("planner {k}'s first step"), TIMEOUT, || {
             log.poll().iter().any(|l| l.1 == k)
         });
@@ -399,26 +388,7 @@ fn twenty_swaps_during_a_placement_keep_every_step_and_the_object_still_reaches_
     );
 
     // The verdict, by ground truth, against the scenario's tolerance.
-    let verdict_path = dir.results().join(format!("{name}-place.json"));
-    let verdict: Value = serde_json::from_str(
-        &std::fs::read_to_string(&verdict_path)
-            .unwrap_or_else(|e| panic!("no verdict at {}: {e}", verdict_path.display())),
-    )
-    .expect("JSON");
-    let task = Scenario::resolve("triangle").expect("the built-in").task;
-    let (mm, deg) = (
-        verdict["position_error_mm"]
-            .as_f64()
-            .expect("position error"),
-        verdict["orientation_error_deg"]
-            .as_f64()
-            .expect("orientation error"),
-    );
-    assert_eq!(verdict["success"], true, "{verdict}\n{}", end.stdout);
-    assert!(
-        mm <= task.tolerance_m * 1e3 && deg <= task.tolerance_rad.to_degrees(),
-        "final error {mm:.1} mm, {deg:.1} deg beyond the tolerance: {verdict}"
-    );
+    let (mm, deg) = assert_placed(&dir.results(), name, "triangle", &end.stdout);
 
     // Every step once, the epochs in order, each of the 21 planners drove.
     let log = log.poll();

@@ -92,6 +92,28 @@ fn assert_row(row: &Value, what: &str) -> u64 {
     values[0]
 }
 
+/// Runs `agp profile <extra...> --seconds 1` in `dir`, writing `out.json` and `out.svg`
+/// there, and returns the JSON and the pid `agp profile` ran as (its floor's private
+/// instance is `pfloor-<pid>`); panics if it fails.
+#[track_caller]
+fn profile_json(dir: &Path, extra: &[&str]) -> (Value, u32) {
+    let mut args = vec!["profile"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--seconds", "1", "--json", "out.json", "--plot", "out.svg"]);
+    let profile = run_agp(dir, &args, TIMEOUT);
+    assert!(
+        profile.status.success(),
+        "agp profile failed: {}{}",
+        profile.stdout,
+        profile.stderr
+    );
+    let text = std::fs::read_to_string(dir.join("out.json")).expect("out.json written");
+    (
+        serde_json::from_str(&text).expect("out.json is JSON"),
+        profile.pid,
+    )
+}
+
 #[test]
 fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_leaves_no_file() {
     let name = "t-profile";
@@ -103,27 +125,7 @@ fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_
         name,
     };
 
-    let profile = run_agp(
-        dir.path(),
-        &[
-            "profile",
-            "--seconds",
-            "1",
-            "--json",
-            "out.json",
-            "--plot",
-            "out.svg",
-        ],
-        TIMEOUT,
-    );
-    assert!(
-        profile.status.success(),
-        "agp profile failed: {}{}",
-        profile.stdout,
-        profile.stderr
-    );
-    let text = std::fs::read_to_string(dir.path().join("out.json")).expect("out.json written");
-    let v: Value = serde_json::from_str(&text).expect("out.json is JSON");
+    let (v, profile_pid) = profile_json(dir.path(), &[]);
 
     let hops = v["hops"].as_array().expect("`hops` is a list");
     let hop_names: Vec<&str> = hops.iter().filter_map(|h| h["name"].as_str()).collect();
@@ -170,7 +172,7 @@ fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_
         assert!(svg.contains(series), "the plot has no series `{series}`");
     }
     // The floor's private instance is gone with it.
-    assert_eq!(count_instance_files(&format!("pfloor-{}", profile.pid)), 0);
+    assert_eq!(count_instance_files(&format!("pfloor-{profile_pid}")), 0);
     // The pipeline, paused while the floor ran, runs again: no process is left stopped.
     let status = run_agp(
         dir.path(),
@@ -208,29 +210,7 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
     // every step goes through the three processes.
     up.wait_for_lines("learning `triangle`", 1, TIMEOUT);
 
-    let profile = run_agp(
-        dir.path(),
-        &[
-            "profile",
-            "--instance",
-            name,
-            "--seconds",
-            "1",
-            "--json",
-            "out.json",
-            "--plot",
-            "out.svg",
-        ],
-        TIMEOUT,
-    );
-    assert!(
-        profile.status.success(),
-        "agp profile failed: {}{}",
-        profile.stdout,
-        profile.stderr
-    );
-    let text = std::fs::read_to_string(dir.path().join("out.json")).expect("out.json written");
-    let v: Value = serde_json::from_str(&text).expect("out.json is JSON");
+    let (v, profile_pid) = profile_json(dir.path(), &["--instance", name]);
 
     // The estimator's hops, and no physics->planner: the planner acts on the estimate.
     let hops = v["hops"].as_array().expect("`hops` is a list");
@@ -283,7 +263,7 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
         !svg.contains("physics-&gt;planner"),
         "the plot has a series no step passed"
     );
-    assert_eq!(count_instance_files(&format!("pfloor-{}", profile.pid)), 0);
+    assert_eq!(count_instance_files(&format!("pfloor-{profile_pid}")), 0);
 
     // Stop the learning run before its end; the supervisor then removes the instance.
     let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
