@@ -510,18 +510,13 @@ impl ShapeMatcher {
             let to_cells = DVec2::from_angle(-theta) * self.inv_cell;
             // Pass 1, no branch: the cell of every point, or OFF_GRID.
             let rotation = CellRotation { to_cells, centre };
-            match self.simd {
-                // SAFETY: `simd` says what the CPU reported.
-                #[cfg(target_arch = "x86_64")]
-                Simd::Avx512 => unsafe {
-                    cells_avx512(rotation, &self.rel_x, &self.rel_y, &mut self.cells);
-                },
-                #[cfg(target_arch = "x86_64")]
-                Simd::Avx2 => unsafe {
-                    cells_avx2(rotation, &self.rel_x, &self.rel_y, &mut self.cells);
-                },
-                _ => cells_body(rotation, &self.rel_x, &self.rel_y, &mut self.cells),
-            }
+            cells_at(
+                self.simd,
+                rotation,
+                &self.rel_x,
+                &self.rel_y,
+                &mut self.cells,
+            );
             // Pass 2: each cell of the mask counts once. The points of a circling come in
             // order along the border, several to a cell: a repeat of the previous point's
             // cell is skipped without touching memory.
@@ -881,6 +876,20 @@ fn cells_body(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut 
     }
 }
 
+/// [`cells_body`] in the vector build `simd`, which must be one this CPU runs
+/// ([`Simd::detect`] or narrower).
+fn cells_at(simd: Simd, rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
+    match simd {
+        // SAFETY: the caller's `simd` is one the CPU reported.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { cells_avx512(rotation, rel_x, rel_y, cells) },
+        // SAFETY: as above.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { cells_avx2(rotation, rel_x, rel_y, cells) },
+        _ => cells_body(rotation, rel_x, rel_y, cells),
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn cells_avx2(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
@@ -1049,19 +1058,10 @@ mod tests {
             off > 0 && off < n,
             "some points on the grid and some off it"
         );
-        #[cfg(target_arch = "x86_64")]
-        {
+        for &simd in Simd::runnable() {
             let mut cells = vec![0; n];
-            if Simd::detect() != Simd::Baseline {
-                // SAFETY: the CPU has AVX2 and FMA.
-                unsafe { cells_avx2(rotation, &rel_x, &rel_y, &mut cells) };
-                assert_eq!(cells, baseline, "AVX2");
-            }
-            if Simd::detect() == Simd::Avx512 {
-                // SAFETY: the CPU has AVX-512F and FMA.
-                unsafe { cells_avx512(rotation, &rel_x, &rel_y, &mut cells) };
-                assert_eq!(cells, baseline, "AVX-512");
-            }
+            cells_at(simd, rotation, &rel_x, &rel_y, &mut cells);
+            assert_eq!(cells, baseline, "{simd:?}");
         }
     }
 }

@@ -28,4 +28,14 @@ impl Simd {
         }
         Self::Baseline
     }
+
+    /// Every build this CPU runs, narrowest first.
+    #[cfg(test)]
+    pub(crate) fn runnable() -> &'static [Self] {
+        match Self::detect() {
+            Self::Avx512 => &[Self::Baseline, Self::Avx2, Self::Avx512],
+            Self::Avx2 => &[Self::Baseline, Self::Avx2],
+            Self::Baseline => &[Self::Baseline],
+        }
+    }
 }

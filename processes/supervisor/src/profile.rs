@@ -21,11 +21,10 @@
 //! After the sampling, it measures the floor: a bare iceoryx2 ping-pong between `agp` and
 //! a copy of itself (`agp profile-floor-pong`), waiting as the pipeline waits (the
 //! supervisor reports its `AGP_WAIT`; the profiler's own is not used) and notifying after
-//! every send as the pipeline does. While
-//! the floor runs, the instance's processes are paused (SIGSTOP, then SIGCONT, also on an
-//! error or Ctrl-C), so the floor has the machine as the pipeline had it: on two cores a
-//! running pipeline would otherwise compete with the floor it is compared to. A lockstep
-//! pipeline loses nothing by the pause. `--no-pause` keeps the pipeline running instead.
+//! every send as the pipeline does. While the floor runs, the instance's processes are
+//! paused (SIGSTOP, then SIGCONT, also on an error or Ctrl-C), so the floor has the machine
+//! as the pipeline had it: on two cores a running pipeline would otherwise compete with
+//! the floor it is compared to. A lockstep pipeline loses nothing by the pause. `--no-pause` keeps the pipeline running instead.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -580,8 +579,6 @@ impl Drop for Paused {
     }
 }
 
-/// The ping side: starts the pong side, measures for `seconds`, stops it, removes the
-/// floor's files.
 /// How the processes of instance `name` wait, as its supervisor reports it: the floor must
 /// wait the same way. An `AGP_WAIT` of the caller's that differs is said and not used.
 fn pipeline_waiting(name: &str) -> Result<WaitStrategy> {
@@ -604,6 +601,8 @@ fn pipeline_waiting(name: &str) -> Result<WaitStrategy> {
     Ok(waiting)
 }
 
+/// The ping side: starts the pong side, both waiting by `waiting`, measures for `seconds`,
+/// stops it, removes the floor's files.
 fn run_floor(seconds: f64, waiting: WaitStrategy) -> Result<Floor> {
     let name = format!("pfloor-{}", std::process::id());
     let instance =
