@@ -1,6 +1,7 @@
 //! The supervisor's control service: `agp status` and `agp down` ask the running `agp up`
 //! of an instance through iceoryx2 request-response, never through files or signals.
 
+use crate::AgpIpc;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::request_response;
 
@@ -283,7 +284,7 @@ pub fn read_str(field: &[u8]) -> String {
 
 /// The control service of an instance.
 pub type ControlService =
-    request_response::PortFactory<ipc::Service, ControlRequest, (), ControlResponse, ()>;
+    request_response::PortFactory<AgpIpc, ControlRequest, (), ControlResponse, ()>;
 
 /// Why the control service could not be reached.
 #[derive(Debug, thiserror::Error)]
@@ -300,10 +301,7 @@ const CONTROL_SERVICE: &str = "agp/control";
 
 impl Instance {
     /// Creates the control service (the supervisor, once per run).
-    pub fn create_control(
-        &self,
-        node: &Node<ipc::Service>,
-    ) -> Result<ControlService, ControlOpenError> {
+    pub fn create_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
         let name: ServiceName = CONTROL_SERVICE
             .try_into()
             .map_err(|_| ControlOpenError::Name)?;
@@ -323,15 +321,11 @@ impl Instance {
         let Ok(name) = ServiceName::new(CONTROL_SERVICE) else {
             return false;
         };
-        ipc::Service::does_exist(&name, self.config(), MessagingPattern::RequestResponse)
-            .unwrap_or(false)
+        AgpIpc::does_exist(&name, self.config(), MessagingPattern::RequestResponse).unwrap_or(false)
     }
 
     /// Opens the control service of a running supervisor (a client).
-    pub fn open_control(
-        &self,
-        node: &Node<ipc::Service>,
-    ) -> Result<ControlService, ControlOpenError> {
+    pub fn open_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
         let name: ServiceName = CONTROL_SERVICE
             .try_into()
             .map_err(|_| ControlOpenError::Name)?;
@@ -360,7 +354,7 @@ pub enum ControlAskError {
 /// A client of the supervisor's control service.
 pub struct ControlClient {
     _service: ControlService,
-    client: iceoryx2::port::client::Client<ipc::Service, ControlRequest, (), ControlResponse, ()>,
+    client: iceoryx2::port::client::Client<AgpIpc, ControlRequest, (), ControlResponse, ()>,
 }
 
 impl ControlClient {
@@ -368,7 +362,7 @@ impl ControlClient {
     /// it takes its instance).
     pub fn open(
         instance: &Instance,
-        node: &Node<ipc::Service>,
+        node: &Node<AgpIpc>,
         wait: std::time::Duration,
     ) -> Result<Self, ControlOpenError> {
         let start = std::time::Instant::now();

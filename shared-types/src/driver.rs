@@ -1,9 +1,10 @@
 use std::time::Duration;
 
+use crate::AgpIpc;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 use crate::control::ActiveEpoch;
 use crate::instance::Instance;
@@ -46,13 +47,13 @@ pub enum DriveError {
 /// With `ground_truth`, it also reads the true poses: that makes it an evaluation tool, which
 /// no estimator or planner may be.
 pub struct LockstepDriver {
-    _node: Node<ipc::Service>,
-    frames: Subscriber<ipc::Service, IrFrame, ()>,
-    truth: Option<Subscriber<ipc::Service, GroundTruth, ()>>,
-    commands: Publisher<ipc::Service, MotorCommand, ()>,
-    resets: Publisher<ipc::Service, Reset, ()>,
-    physics_inbox: Notifier<ipc::Service>,
-    epochs: Subscriber<ipc::Service, ActiveEpoch, ()>,
+    _node: Node<AgpIpc>,
+    frames: Subscriber<AgpIpc, IrFrame, ()>,
+    truth: Option<Subscriber<AgpIpc, GroundTruth, ()>>,
+    commands: Publisher<AgpIpc, MotorCommand, ()>,
+    resets: Publisher<AgpIpc, Reset, ()>,
+    physics_inbox: Notifier<AgpIpc>,
+    epochs: Subscriber<AgpIpc, ActiveEpoch, ()>,
     waiter: Waiter,
     frame: IrFrame,
     /// The frame the last command or reset will make, until it is taken.
@@ -102,7 +103,7 @@ impl Awaited {
 /// frame of another physics run than `base` (`base` 0: none seen yet, every run is
 /// accepted). Stamps the planner's receive on the frame returned.
 fn poll_frames(
-    frames: &Subscriber<ipc::Service, IrFrame, ()>,
+    frames: &Subscriber<AgpIpc, IrFrame, ()>,
     base: u64,
     awaited: Awaited,
 ) -> Option<Result<IrFrame, IrFrame>> {

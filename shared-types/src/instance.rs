@@ -1,3 +1,4 @@
+use crate::AgpIpc;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -157,7 +158,18 @@ impl Instance {
         &self,
         node_name: &str,
         handle_signals: bool,
-    ) -> Result<Node<ipc::Service>, NodeCreationFailure> {
+    ) -> Result<Node<AgpIpc>, NodeCreationFailure> {
+        self.node_of::<AgpIpc>(node_name, handle_signals)
+    }
+
+    /// [`Instance::node`] for another iceoryx2 service type (`bench-hop` measures
+    /// iceoryx2's own `ipc::Service` beside [`AgpIpc`]). Processes of one pipeline all use
+    /// [`AgpIpc`].
+    pub fn node_of<S: iceoryx2::service::Service>(
+        &self,
+        node_name: &str,
+        handle_signals: bool,
+    ) -> Result<Node<S>, NodeCreationFailure> {
         let mut builder = NodeBuilder::new().config(&self.config);
         if let Ok(n) = NodeName::new(node_name) {
             builder = builder.name(&n);
@@ -168,7 +180,7 @@ impl Instance {
             } else {
                 SignalHandlingMode::Disabled
             })
-            .create::<ipc::Service>()
+            .create::<S>()
     }
 
     /// Every file this instance has on the machine: its `/dev/shm` entries and, if present,
@@ -199,7 +211,7 @@ impl Instance {
         Ok(removed)
     }
 
-    pub fn ir_frames(&self, node: &Node<ipc::Service>) -> Result<Topic<IrFrame>, OpenError> {
+    pub fn ir_frames(&self, node: &Node<AgpIpc>) -> Result<Topic<IrFrame>, OpenError> {
         Topic::open(
             node,
             ServiceNames::IR_FRAMES,
@@ -208,7 +220,7 @@ impl Instance {
         )
     }
 
-    pub fn ground_truth(&self, node: &Node<ipc::Service>) -> Result<Topic<GroundTruth>, OpenError> {
+    pub fn ground_truth(&self, node: &Node<AgpIpc>) -> Result<Topic<GroundTruth>, OpenError> {
         Topic::open(
             node,
             ServiceNames::GROUND_TRUTH,
@@ -217,10 +229,7 @@ impl Instance {
         )
     }
 
-    pub fn motor_commands(
-        &self,
-        node: &Node<ipc::Service>,
-    ) -> Result<Topic<MotorCommand>, OpenError> {
+    pub fn motor_commands(&self, node: &Node<AgpIpc>) -> Result<Topic<MotorCommand>, OpenError> {
         Topic::open(
             node,
             ServiceNames::MOTOR_COMMANDS,
@@ -229,7 +238,7 @@ impl Instance {
         )
     }
 
-    pub fn resets(&self, node: &Node<ipc::Service>) -> Result<Topic<Reset>, OpenError> {
+    pub fn resets(&self, node: &Node<AgpIpc>) -> Result<Topic<Reset>, OpenError> {
         Topic::open(
             node,
             ServiceNames::RESETS,
@@ -238,7 +247,7 @@ impl Instance {
         )
     }
 
-    pub fn estimates(&self, node: &Node<ipc::Service>) -> Result<Topic<ObjectEstimate>, OpenError> {
+    pub fn estimates(&self, node: &Node<AgpIpc>) -> Result<Topic<ObjectEstimate>, OpenError> {
         Topic::open(
             node,
             ServiceNames::ESTIMATES,
@@ -247,7 +256,7 @@ impl Instance {
         )
     }
 
-    pub fn grids(&self, node: &Node<ipc::Service>) -> Result<Topic<GradientGrid>, OpenError> {
+    pub fn grids(&self, node: &Node<AgpIpc>) -> Result<Topic<GradientGrid>, OpenError> {
         Topic::open(
             node,
             ServiceNames::GRIDS,
@@ -256,7 +265,7 @@ impl Instance {
         )
     }
 
-    pub fn task(&self, node: &Node<ipc::Service>) -> Result<Topic<Task>, OpenError> {
+    pub fn task(&self, node: &Node<AgpIpc>) -> Result<Topic<Task>, OpenError> {
         Topic::open(
             node,
             ServiceNames::TASK,
@@ -271,7 +280,7 @@ impl Instance {
     /// wakes physics through its inbox).
     pub fn active_epoch(
         &self,
-        node: &Node<ipc::Service>,
+        node: &Node<AgpIpc>,
     ) -> Result<Topic<crate::control::ActiveEpoch>, OpenError> {
         Topic::open(
             node,
@@ -293,7 +302,7 @@ impl ServiceNames {
 
 impl Instance {
     /// Learning-protocol events; notifications go to the IR frames' event service.
-    pub fn learn_events(&self, node: &Node<ipc::Service>) -> Result<Topic<LearnEvent>, OpenError> {
+    pub fn learn_events(&self, node: &Node<AgpIpc>) -> Result<Topic<LearnEvent>, OpenError> {
         Topic::open(
             node,
             ServiceNames::LEARN_EVENTS,
@@ -303,10 +312,7 @@ impl Instance {
     }
 
     /// The estimator's learning reports, with an event service of their own.
-    pub fn learn_reports(
-        &self,
-        node: &Node<ipc::Service>,
-    ) -> Result<Topic<LearnReport>, OpenError> {
+    pub fn learn_reports(&self, node: &Node<AgpIpc>) -> Result<Topic<LearnReport>, OpenError> {
         Topic::open(
             node,
             ServiceNames::LEARN_REPORTS,
@@ -448,17 +454,12 @@ impl std::error::Error for OpenError {}
 
 /// A publish-subscribe service and its paired event service.
 pub struct Topic<T: std::fmt::Debug + ZeroCopySend + 'static> {
-    pub data: publish_subscribe::PortFactory<ipc::Service, T, ()>,
-    pub event: event::PortFactory<ipc::Service>,
+    pub data: publish_subscribe::PortFactory<AgpIpc, T, ()>,
+    pub event: event::PortFactory<AgpIpc>,
 }
 
 impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
-    fn open(
-        node: &Node<ipc::Service>,
-        name: &str,
-        event_str: &str,
-        qos: Qos,
-    ) -> Result<Self, OpenError> {
+    fn open(node: &Node<AgpIpc>, name: &str, event_str: &str, qos: Qos) -> Result<Self, OpenError> {
         let data_name: ServiceName = name
             .try_into()
             .map_err(|_| OpenError::ServiceName(name.to_owned()))?;

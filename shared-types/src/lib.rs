@@ -12,6 +12,7 @@ mod control;
 mod driver;
 mod instance;
 mod payloads;
+mod service;
 mod wait;
 
 pub use control::{
@@ -25,6 +26,7 @@ pub use instance::{
     instance_files_in,
 };
 pub use payloads::*;
+pub use service::{AgpIpc, PooledGuard, PooledRc};
 pub use wait::{
     WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
     shutdown_requested,

@@ -2,7 +2,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
-use iceoryx2::prelude::ipc;
+
+use crate::AgpIpc;
 
 static SHUTDOWN: AtomicBool = AtomicBool::new(false);
 
@@ -135,18 +136,36 @@ pub enum WaitOutcome<T> {
 
 /// Waits for input on one event service with a [`WaitStrategy`]; never blocks longer than
 /// the timeout it is given, and returns at once when shutdown is requested.
+///
+/// Blocking is a `sem_wait` on the listener's futex (see `service.rs`), which has no
+/// timeout of its own: a timer of this thread ([`DeadlineTimer`]) sends it a signal at the
+/// end of each block, and that signal is unblocked only while the thread sits in `sem_wait`,
+/// so it never interrupts anything else.
 pub struct Waiter {
-    listener: Listener<ipc::Service>,
+    listener: Listener<AgpIpc>,
     strategy: WaitStrategy,
+    timer: Option<DeadlineTimer>,
 }
 
 /// Longest single block, so a shutdown request is seen within this even if no signal
 /// interrupts the wait.
 const BLOCK_SLICE: Duration = Duration::from_millis(50);
 
+/// A block shorter than this is not worth a timer: the wait yields instead.
+const SHORTEST_BLOCK: Duration = Duration::from_micros(50);
+
 impl Waiter {
-    pub fn new(listener: Listener<ipc::Service>, strategy: WaitStrategy) -> Self {
-        Self { listener, strategy }
+    /// A waiter for `listener`, used on this thread (a listener never leaves its thread).
+    pub fn new(listener: Listener<AgpIpc>, strategy: WaitStrategy) -> Self {
+        let timer = match strategy {
+            WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. } => DeadlineTimer::new(),
+            WaitStrategy::Spin | WaitStrategy::Yield => None,
+        };
+        Self {
+            listener,
+            strategy,
+            timer,
+        }
     }
 
     pub fn strategy(&self) -> WaitStrategy {
@@ -176,12 +195,30 @@ impl Waiter {
                 WaitStrategy::Yield => std::thread::yield_now(),
                 WaitStrategy::SpinThenBlock { spin } if elapsed < spin => std::thread::yield_now(),
                 WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. } => {
-                    let slice = (timeout - elapsed).min(BLOCK_SLICE);
-                    // A notification sent between `poll` and here stays pending, so this
-                    // returns at once: no wake-up is lost. An error (an interrupting signal)
-                    // just means "poll again".
-                    let _ = self.listener.timed_wait(|_| {}, slice);
+                    self.block((timeout - elapsed).min(BLOCK_SLICE));
                 }
+            }
+        }
+    }
+
+    /// Blocks until a notification or for `slice` at most. A notification sent between the
+    /// last poll and here stays counted in the semaphore, so this returns at once: no wake-up
+    /// is lost. Every way out (a notification, the timer, SIGTERM) just means "poll again".
+    fn block(&self, slice: Duration) {
+        match &self.timer {
+            _ if slice < SHORTEST_BLOCK => std::thread::yield_now(),
+            Some(timer) => {
+                // The timer ticks every BLOCK_SLICE anyway: set it only for a shorter block.
+                if slice < BLOCK_SLICE {
+                    timer.arm(slice);
+                }
+                timer.unmask();
+                let _ = self.listener.blocking_wait(|_| {});
+                timer.mask();
+            }
+            // No timer for this thread: iceoryx2's own timed wait, which polls.
+            None => {
+                let _ = self.listener.timed_wait(|_| {}, slice);
             }
         }
     }
@@ -189,5 +226,187 @@ impl Waiter {
     /// Consumes pending notifications without blocking.
     pub fn drain(&self) {
         let _ = self.listener.try_wait(|_| {});
+    }
+}
+
+/// The signal that ends a block at its deadline. Real-time signals above the few glibc
+/// keeps for itself are free for applications.
+fn wake_signal() -> libc::c_int {
+    libc::SIGRTMIN() + 6
+}
+
+extern "C" fn on_wake_signal(_: libc::c_int) {}
+
+/// The set holding only [`wake_signal`].
+fn wake_set() -> libc::sigset_t {
+    // SAFETY: sigemptyset/sigaddset initialise the set we own.
+    unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        libc::sigaddset(&mut set, wake_signal());
+        set
+    }
+}
+
+/// A POSIX timer that signals the thread that made it every [`BLOCK_SLICE`], or sooner
+/// when a block must end sooner (then again every [`BLOCK_SLICE`]: a tick that fell just
+/// before the block began is followed by another), its signal unmasked only while the
+/// thread blocks. A block of [`BLOCK_SLICE`] may so end early, at the next tick: the waiter
+/// polls and blocks again.
+struct DeadlineTimer {
+    id: libc::timer_t,
+    set: libc::sigset_t,
+}
+
+impl DeadlineTimer {
+    /// Installs the signal's handler (once per process, without `SA_RESTART`, so the signal
+    /// ends `sem_wait`), masks the signal on this thread and makes its timer; `None` if the
+    /// system refuses one, and the waiter falls back to iceoryx2's timed wait.
+    fn new() -> Option<Self> {
+        static HANDLER: std::sync::Once = std::sync::Once::new();
+        HANDLER.call_once(|| {
+            // SAFETY: the handler does nothing, which is async-signal-safe.
+            unsafe {
+                let mut action: libc::sigaction = std::mem::zeroed();
+                action.sa_sigaction = on_wake_signal as extern "C" fn(libc::c_int) as usize;
+                libc::sigemptyset(&mut action.sa_mask);
+                action.sa_flags = 0;
+                libc::sigaction(wake_signal(), &action, std::ptr::null_mut());
+            }
+        });
+        let set = wake_set();
+        // SAFETY: plain system calls on values we own; the sigevent names this thread.
+        unsafe {
+            if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+                return None;
+            }
+            let mut event: libc::sigevent = std::mem::zeroed();
+            event.sigev_notify = libc::SIGEV_THREAD_ID;
+            event.sigev_signo = wake_signal();
+            event.sigev_notify_thread_id = libc::gettid();
+            let mut id: libc::timer_t = std::ptr::null_mut();
+            if libc::timer_create(libc::CLOCK_MONOTONIC, &mut event, &mut id) != 0 {
+                return None;
+            }
+            let timer = Self { id, set };
+            timer.arm(BLOCK_SLICE);
+            Some(timer)
+        }
+    }
+
+    fn arm(&self, first: Duration) {
+        let spec = |d: Duration| libc::timespec {
+            tv_sec: d.as_secs() as libc::time_t,
+            tv_nsec: d.subsec_nanos() as libc::c_long,
+        };
+        let value = libc::itimerspec {
+            it_value: spec(first),
+            it_interval: spec(BLOCK_SLICE),
+        };
+        // SAFETY: our own timer, a value we own.
+        unsafe { libc::timer_settime(self.id, 0, &value, std::ptr::null_mut()) };
+    }
+
+    fn unmask(&self) {
+        // SAFETY: changes this thread's mask only.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &self.set, std::ptr::null_mut()) };
+    }
+
+    fn mask(&self) {
+        // SAFETY: changes this thread's mask only.
+        unsafe { libc::pthread_sigmask(libc::SIG_BLOCK, &self.set, std::ptr::null_mut()) };
+    }
+}
+
+impl Drop for DeadlineTimer {
+    fn drop(&mut self) {
+        // SAFETY: our own timer, deleted once. A tick still pending stays masked.
+        unsafe { libc::timer_delete(self.id) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Instance;
+    use iceoryx2::port::notifier::Notifier;
+    use iceoryx2::prelude::ServiceName;
+
+    /// Runs `f` with a listener and a notifier of one event service of a private instance,
+    /// then checks the instance left no file behind.
+    fn with_event(tag: &str, f: impl FnOnce(Listener<AgpIpc>, &Notifier<AgpIpc>)) {
+        let instance = Instance::new(&format!("w{tag}{}", std::process::id())).expect("name");
+        instance.remove_files().expect("clean start");
+        {
+            let node = instance.node("wait-test", false).expect("node");
+            let name: ServiceName = "wait-test.ev".try_into().expect("service name");
+            let service = node
+                .service_builder(&name)
+                .event()
+                .open_or_create()
+                .expect("event service");
+            let listener = service.listener_builder().create().expect("listener");
+            let notifier = service.notifier_builder().create().expect("notifier");
+            f(listener, &notifier);
+        }
+        instance.remove_files().expect("remove the files");
+        assert!(instance.files().is_empty(), "left {:?}", instance.files());
+    }
+
+    #[test]
+    fn a_block_with_nothing_to_wake_it_ends_at_the_timeout_not_before() {
+        with_event("to", |listener, _| {
+            let waiter = Waiter::new(listener, WaitStrategy::Block);
+            // Shorter than one timer period, and longer than two.
+            for timeout in [
+                Duration::from_millis(20),
+                BLOCK_SLICE * 2 + Duration::from_millis(10),
+            ] {
+                let start = Instant::now();
+                let mut polls = 0;
+                let outcome = waiter.wait_for(timeout, || {
+                    polls += 1;
+                    None::<()>
+                });
+                assert_eq!(outcome, WaitOutcome::TimedOut);
+                assert!(
+                    start.elapsed() >= timeout,
+                    "returned after {:?} of {timeout:?}",
+                    start.elapsed()
+                );
+                // Blocking, not polling: a few polls per timer period at most.
+                assert!(
+                    polls <= 4 * (timeout.as_millis() / BLOCK_SLICE.as_millis() + 2),
+                    "{polls} polls in {timeout:?}"
+                );
+            }
+        });
+    }
+
+    #[test]
+    fn a_notification_sent_before_the_block_ends_it_at_once() {
+        with_event("nt", |listener, notifier| {
+            let waiter = Waiter::new(listener, WaitStrategy::Block);
+            let mut polls = 0;
+            let start = Instant::now();
+            let outcome = waiter.wait_for(Duration::from_secs(20), || {
+                polls += 1;
+                if polls == 1 {
+                    // The sample "arrives" between this poll and the block, with its
+                    // notification: the block must not miss it.
+                    notifier.notify().expect("notify");
+                    None
+                } else {
+                    Some(polls)
+                }
+            });
+            assert_eq!(outcome, WaitOutcome::Ready(2));
+            // The other way out of the block is the timer's next tick.
+            assert!(
+                start.elapsed() < BLOCK_SLICE,
+                "woken after {:?}: by the timer, not the notification",
+                start.elapsed()
+            );
+        });
     }
 }

@@ -5,10 +5,11 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
+use agp_shared_types::AgpIpc;
 use agp_shared_types::Instance;
 use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag};
 use iceoryx2::node::{NodeState, NodeView};
-use iceoryx2::prelude::{CallbackProgression, Node, NodeBuilder, ipc};
+use iceoryx2::prelude::{CallbackProgression, Node, NodeBuilder};
 use iceoryx2::service::port_factory::PortFactory;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -27,7 +28,7 @@ fn launch(instance: &str, planner: &str, ag: &std::path::Path) -> String {
 
 /// The names of the nodes that hold a subscriber of the instance's ground truth, and
 /// whether the planner has published its task (it does once it drives physics).
-fn readers(instance: &Instance, observer: &Node<ipc::Service>) -> (BTreeSet<String>, bool) {
+fn readers(instance: &Instance, observer: &Node<AgpIpc>) -> (BTreeSet<String>, bool) {
     let truth = instance
         .ground_truth(observer)
         .expect("open the ground truth");
@@ -37,7 +38,7 @@ fn readers(instance: &Instance, observer: &Node<ipc::Service>) -> (BTreeSet<Stri
         CallbackProgression::Continue
     });
     let mut names = BTreeSet::new();
-    Node::<ipc::Service>::list(instance.config(), |state| {
+    Node::<AgpIpc>::list(instance.config(), |state| {
         if let NodeState::Alive(view) = &state
             && ids.contains(view.id())
             && let Some(details) = view.details().as_ref()
@@ -64,7 +65,7 @@ fn check(planner: &str, expected: &[&str]) {
     let instance = Instance::new(&instance_name).expect("a valid name");
     let observer = NodeBuilder::new()
         .config(instance.config())
-        .create::<ipc::Service>()
+        .create::<AgpIpc>()
         .expect("an observer node");
     let mut seen = BTreeSet::new();
     up.until("the planner drives", TIMEOUT, || {

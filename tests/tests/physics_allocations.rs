@@ -12,9 +12,6 @@ use agp_tests::bin_path;
 /// Steps driven; physics counts those after its first 500.
 const STEPS: u64 = 3000;
 
-/// Loans physics makes per step: the ground truth and the IR frame.
-const LOANS_PER_STEP: u64 = 2;
-
 /// Physics's steady-state line: allocations in its loop, in the simulation library, in
 /// iceoryx2, and the steps counted.
 #[derive(Debug, Clone, Copy)]
@@ -106,25 +103,24 @@ fn drive_and_count(tag: &str) -> Counts {
 }
 
 #[test]
-fn physics_loop_allocates_nothing_per_lockstep_step_and_iceoryx2_one_rc_per_loan() {
+fn physics_loop_and_iceoryx2_allocate_nothing_per_lockstep_step() {
     let c = drive_and_count("t-alloc");
     assert_eq!(
         c.looping, 0,
         "physics's loop allocated {} times in {} steady-state steps",
         c.looping, c.steps
     );
-    // iceoryx2 0.10 allocates one `Rc` per loaned sample (`Publisher::loan_uninit`), and
-    // nothing more per step.
-    assert!(
-        c.iceoryx2 <= LOANS_PER_STEP * c.steps,
-        "iceoryx2 allocated {} times in {} steps: more than one per loan",
-        c.iceoryx2,
-        c.steps
+    // Two loans a step (the IR frame, the ground truth), a command received, the wait: the
+    // loans' bookkeeping comes from the pool of `AgpIpc`'s policy, not the heap.
+    assert_eq!(
+        c.iceoryx2, 0,
+        "iceoryx2 allocated {} times in {} steady-state steps",
+        c.iceoryx2, c.steps
     );
 }
 
 #[test]
-#[ignore = "fails today: agp_physics::Sim::step allocates about 4 times per step (measured 9724 in 2500 steps)"]
+#[ignore = "fails today: rapier2d 0.36 allocates twice per step inside PhysicsPipeline::step (RigidBodySet::take_modified leaves an empty Vec that the next get_mut regrows; StageSync::new collects one per solve)"]
 fn the_simulation_step_allocates_nothing_per_lockstep_step() {
     let c = drive_and_count("t-alloc-sim");
     assert_eq!(

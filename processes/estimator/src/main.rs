@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
 use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
     LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy, Waiter,
@@ -30,7 +31,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 /// Learns affordance gradients from IR frames and publishes them.
 ///
@@ -154,11 +155,11 @@ fn run() -> Result<()> {
 
 /// The ports and the learning state.
 struct Estimator {
-    _node: Node<ipc::Service>,
+    _node: Node<AgpIpc>,
     waiter: Waiter,
     state: State,
-    grids: Publisher<ipc::Service, GradientGrid, ()>,
-    grids_wake: Notifier<ipc::Service>,
+    grids: Publisher<AgpIpc, GradientGrid, ()>,
+    grids_wake: Notifier<AgpIpc>,
     grids_seq: u64,
     results: PathBuf,
     object: String,
@@ -166,12 +167,12 @@ struct Estimator {
 
 /// What the main loop's poll works on.
 struct State {
-    frames: Subscriber<ipc::Service, IrFrame, ()>,
-    events: Subscriber<ipc::Service, LearnEvent, ()>,
-    estimates: Publisher<ipc::Service, ObjectEstimate, ()>,
-    estimates_wake: Notifier<ipc::Service>,
-    reports: Publisher<ipc::Service, LearnReport, ()>,
-    reports_wake: Notifier<ipc::Service>,
+    frames: Subscriber<AgpIpc, IrFrame, ()>,
+    events: Subscriber<AgpIpc, LearnEvent, ()>,
+    estimates: Publisher<AgpIpc, ObjectEstimate, ()>,
+    estimates_wake: Notifier<AgpIpc>,
+    reports: Publisher<AgpIpc, LearnReport, ()>,
+    reports_wake: Notifier<AgpIpc>,
     /// The session under way (`None` once learning ended, or with `--load`).
     session: Option<LearningSession>,
     report_seq: u64,

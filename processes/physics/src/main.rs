@@ -4,6 +4,7 @@
 use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     ActiveEpoch, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
     WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested,
@@ -17,7 +18,6 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::ipc;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Clock {
@@ -117,13 +117,13 @@ fn run() -> Result<()> {
 }
 
 struct Ports {
-    frames: Publisher<ipc::Service, IrFrame, ()>,
-    frames_ev: Notifier<ipc::Service>,
-    truth: Publisher<ipc::Service, GroundTruth, ()>,
-    truth_ev: Notifier<ipc::Service>,
-    commands: Subscriber<ipc::Service, MotorCommand, ()>,
-    resets: Subscriber<ipc::Service, Reset, ()>,
-    epochs: Subscriber<ipc::Service, ActiveEpoch, ()>,
+    frames: Publisher<AgpIpc, IrFrame, ()>,
+    frames_ev: Notifier<AgpIpc>,
+    truth: Publisher<AgpIpc, GroundTruth, ()>,
+    truth_ev: Notifier<AgpIpc>,
+    commands: Subscriber<AgpIpc, MotorCommand, ()>,
+    resets: Subscriber<AgpIpc, Reset, ()>,
+    epochs: Subscriber<AgpIpc, ActiveEpoch, ()>,
 }
 
 fn port_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -134,8 +134,8 @@ impl Ports {
     /// Opens every port physics uses, and the listener of its inbox.
     fn open(
         instance: &Instance,
-        node: &iceoryx2::prelude::Node<ipc::Service>,
-    ) -> Result<(Self, Listener<ipc::Service>)> {
+        node: &iceoryx2::prelude::Node<AgpIpc>,
+    ) -> Result<(Self, Listener<AgpIpc>)> {
         let frames = instance.ir_frames(node)?;
         let truth = instance.ground_truth(node)?;
         let commands = instance.motor_commands(node)?;
@@ -205,7 +205,7 @@ fn received(c: &MotorCommand) -> TimingHeader {
 }
 
 /// The latest active epoch the supervisor published, or `current` when none is pending.
-fn latest_epoch(epochs: &Subscriber<ipc::Service, ActiveEpoch, ()>, current: u64) -> u64 {
+fn latest_epoch(epochs: &Subscriber<AgpIpc, ActiveEpoch, ()>, current: u64) -> u64 {
     let mut epoch = current;
     while let Ok(Some(e)) = epochs.receive() {
         epoch = e.epoch;
@@ -292,11 +292,11 @@ impl Runner {
     /// Applies the last pending reset, if any. Returns whether one was applied.
     fn apply_resets(&mut self) -> Result<bool> {
         let mut last = None;
-        while let Some(r) = self
-            .ports
-            .resets
-            .receive()
-            .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
+        while let Some(r) = {
+            let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
+            self.ports.resets.receive()
+        }
+        .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
         {
             if r.epoch > self.active_epoch {
                 // A planner sends nothing before it saw its epoch active, so the epoch's
@@ -310,6 +310,7 @@ impl Runner {
             }
         }
         if let Some(r) = last {
+            let _in_simulation = alloc_count::enter(alloc_count::Region::Simulation);
             self.sim.reset(pose(r.object), pose(r.robot));
             self.reset_seq = r.seq;
             return Ok(true);

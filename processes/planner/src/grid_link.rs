@@ -3,10 +3,11 @@
 use std::time::Duration;
 
 use agp_affordance::{AffordanceGradient, GridSetAssembler};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{DriveError, GradientGrid, Instance, WaitOutcome, WaitStrategy, Waiter};
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 /// Reads the instance's `grids` topic and rebuilds the estimator's [`AffordanceGradient`]
 /// from the newest complete set of grids (every kind of every alpha of one seq).
@@ -20,11 +21,11 @@ use iceoryx2::prelude::{Node, ipc};
 /// (its seq counts from 1 again). The topic's history hands a late subscriber the last
 /// publications, oldest first, so it ends on the newest set as well.
 pub struct GridLink {
-    subscriber: Subscriber<ipc::Service, GradientGrid, ()>,
+    subscriber: Subscriber<AgpIpc, GradientGrid, ()>,
     /// Woken by the estimator once per published set.
     waiter: Waiter,
     set: GridSetAssembler,
-    _node: Node<ipc::Service>,
+    _node: Node<AgpIpc>,
 }
 
 fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -114,7 +115,7 @@ impl GridLink {
 /// Feeds every grid that arrived into `set`, each read in place and released at once; a
 /// grid of another seq drops the set under way and starts its own.
 fn drain(
-    subscriber: &Subscriber<ipc::Service, GradientGrid, ()>,
+    subscriber: &Subscriber<AgpIpc, GradientGrid, ()>,
     set: &mut GridSetAssembler,
 ) -> Result<()> {
     while let Some(sample) = subscriber

@@ -30,6 +30,7 @@ use agp_planner::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase,
     PushRoutine, PushSettings,
 };
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport, LearnReportKind,
     LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter, monotonic_ns, stage,
@@ -40,7 +41,7 @@ use glam::DVec2;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 /// The alphas of the protocol, degrees, in the order they are run.
 pub const ALPHAS_DEG: [f64; 3] = [0.0, 15.0, -15.0];
@@ -92,12 +93,12 @@ const SHAPE_APPROACH_SPEED: f64 = 0.08;
 
 /// The planner's ports to the estimator: events out, acknowledgements and reports in.
 struct EstimatorLink {
-    _node: Node<ipc::Service>,
-    events: Publisher<ipc::Service, LearnEvent, ()>,
-    wake: Notifier<ipc::Service>,
-    estimates: Subscriber<ipc::Service, ObjectEstimate, ()>,
+    _node: Node<AgpIpc>,
+    events: Publisher<AgpIpc, LearnEvent, ()>,
+    wake: Notifier<AgpIpc>,
+    estimates: Subscriber<AgpIpc, ObjectEstimate, ()>,
     estimates_waiter: Waiter,
-    reports: Subscriber<ipc::Service, LearnReport, ()>,
+    reports: Subscriber<AgpIpc, LearnReport, ()>,
     reports_waiter: Waiter,
     seq: u64,
     /// Publish stamp of the newest frame the estimator acknowledged.
@@ -282,7 +283,7 @@ impl EstimatorLink {
 /// Takes the estimates that arrived: raises `acked` to the newest acknowledged publish
 /// stamp and keeps that frame's estimate, with its receipt, in `latest`.
 fn take_estimates(
-    estimates: &Subscriber<ipc::Service, ObjectEstimate, ()>,
+    estimates: &Subscriber<AgpIpc, ObjectEstimate, ()>,
     acked: &mut u64,
     latest: &mut Option<(ObjectEstimate, u64)>,
 ) {

@@ -7,6 +7,7 @@ mod task_mode;
 use std::time::Duration;
 
 use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver, Pose2,
     TaskKind, install_shutdown_handler, monotonic_ns, stage,
@@ -96,7 +97,7 @@ struct Args {
 /// The planner's half of a hot swap (pipeline.md, "Hot-swapping the planner").
 struct SwapIn {
     client: ControlClient,
-    _node: iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    _node: iceoryx2::prelude::Node<AgpIpc>,
     epoch: u64,
     ready_ns: u64,
 }

@@ -23,6 +23,7 @@ use agp_planner::{
     EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
     trajectory_path,
 };
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     DriveError, Instance, LockstepDriver, MAX_PATH_POINTS, Pose2, TaskKind, stage,
 };
@@ -30,7 +31,7 @@ use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use glam::DVec2;
 use iceoryx2::port::publisher::Publisher;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 use crate::SwapIn;
 use crate::grid_link::GridLink;
@@ -351,8 +352,8 @@ fn describe_task(task: &Task) -> String {
 
 /// The task as published: the publisher's history hands it to late readers while it lives.
 struct TaskPublication {
-    _publisher: Publisher<ipc::Service, agp_shared_types::Task, ()>,
-    _node: Node<ipc::Service>,
+    _publisher: Publisher<AgpIpc, agp_shared_types::Task, ()>,
+    _node: Node<AgpIpc>,
 }
 
 /// Publishes the task on the instance's latched `task` topic: what the evaluation judges.

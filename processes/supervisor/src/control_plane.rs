@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use std::process::Child;
 use std::time::{Duration, Instant};
 
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     ActiveEpoch, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
     MAX_STATUS_PROCESSES, ProcessState, Topic, read_str, write_str,
@@ -25,7 +26,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 use agp_supervisor::LaunchConfig;
 
@@ -36,7 +37,7 @@ use crate::up::{Log, RunEnd, Slot, SlotState, describe, signal_group, spawn_proc
 /// request says otherwise.
 const DEFAULT_SWAP_TIMEOUT: Duration = Duration::from_secs(10);
 
-type Request = ActiveRequest<ipc::Service, ControlRequest, (), ControlResponse, ()>;
+type Request = ActiveRequest<AgpIpc, ControlRequest, (), ControlResponse, ()>;
 
 enum SwapPhase {
     /// Started; waiting for its `Ready`.
@@ -69,10 +70,10 @@ struct Retiring {
 
 /// The control service, the active epoch and the swaps of one run.
 pub(crate) struct ControlPlane {
-    server: Server<ipc::Service, ControlRequest, (), ControlResponse, ()>,
+    server: Server<AgpIpc, ControlRequest, (), ControlResponse, ()>,
     _service: ControlService,
-    epochs: Publisher<ipc::Service, ActiveEpoch, ()>,
-    physics_inbox: Notifier<ipc::Service>,
+    epochs: Publisher<AgpIpc, ActiveEpoch, ()>,
+    physics_inbox: Notifier<AgpIpc>,
     _epoch_topic: Topic<ActiveEpoch>,
     active_epoch: u64,
     next_epoch: u64,
@@ -95,7 +96,7 @@ impl ControlPlane {
     /// every status reply carries.
     pub(crate) fn open(
         instance: &Instance,
-        node: &Node<ipc::Service>,
+        node: &Node<AgpIpc>,
         log: &Log,
         waiting: &str,
     ) -> Result<Self> {

@@ -11,17 +11,18 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use agp_planner::{EpisodeConfig, Evaluation, PoseSample, Task};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{GroundTruth, Instance, Pose2, TaskKind};
 use agp_world::Scenario;
 use anyhow::{Result, anyhow, bail};
 use glam::DVec2;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 /// The object's true poses as an evaluation records them: the first one, then one every
 /// `every` physics steps while the robot's body touches the object.
 pub struct TruthRecorder {
-    subscriber: Subscriber<ipc::Service, GroundTruth, ()>,
+    subscriber: Subscriber<AgpIpc, GroundTruth, ()>,
     every: u64,
     /// What was recorded since the last [`TruthRecorder::restart`].
     pub samples: Vec<PoseSample>,
@@ -33,7 +34,7 @@ pub struct TruthRecorder {
 
 impl TruthRecorder {
     /// Subscribes to `instance`'s ground truth on `node`.
-    pub fn open(instance: &Instance, node: &Node<ipc::Service>, every: u64) -> Result<Self> {
+    pub fn open(instance: &Instance, node: &Node<AgpIpc>, every: u64) -> Result<Self> {
         let subscriber = instance
             .ground_truth(node)
             .map_err(|e| anyhow!("cannot open the ground truth: {e:?}"))?

@@ -10,10 +10,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_planner::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2};
 use agp_world::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 use crate::children::{GuardedChild, sibling_executable};
 use crate::evaluation::TruthRecorder;
@@ -33,7 +34,7 @@ pub struct PipelineBench {
     /// The experimenter's hand: resets only, never a motor command.
     driver: LockstepDriver,
     truth: TruthRecorder,
-    _node: Node<ipc::Service>,
+    _node: Node<AgpIpc>,
     logs: tempfile::TempDir,
     episodes: u32,
     /// Ground-truth samples the evaluation missed (its buffer overflowed), all episodes.

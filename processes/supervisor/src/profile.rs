@@ -30,6 +30,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     Instance, IrFrame, TimingHeader, WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler,
     monotonic_ns, shutdown_requested, stage,
@@ -425,22 +426,22 @@ type FloorMessage = TimingHeader;
 const FLOOR_READY: u64 = u64::MAX - 1;
 const FLOOR_STOP: u64 = u64::MAX;
 
-type FloorTopic = publish_subscribe::PortFactory<ipc::Service, FloorMessage, ()>;
-type FloorEvents = event::PortFactory<ipc::Service>;
+type FloorTopic = publish_subscribe::PortFactory<AgpIpc, FloorMessage, ()>;
+type FloorEvents = event::PortFactory<AgpIpc>;
 
 /// One side's ports of the floor.
 struct FloorPorts {
-    publisher: Publisher<ipc::Service, FloorMessage, ()>,
-    subscriber: Subscriber<ipc::Service, FloorMessage, ()>,
-    notifier: Notifier<ipc::Service>,
+    publisher: Publisher<AgpIpc, FloorMessage, ()>,
+    subscriber: Subscriber<AgpIpc, FloorMessage, ()>,
+    notifier: Notifier<AgpIpc>,
     waiter: Waiter,
     _services: (FloorTopic, FloorTopic, FloorEvents, FloorEvents),
 }
 
 impl FloorPorts {
-    fn open(node: &Node<ipc::Service>, ping_side: bool, waiting: WaitStrategy) -> Result<Self> {
+    fn open(node: &Node<AgpIpc>, ping_side: bool, waiting: WaitStrategy) -> Result<Self> {
         let topic =
-            |name: &str| -> Result<publish_subscribe::PortFactory<ipc::Service, FloorMessage, ()>> {
+            |name: &str| -> Result<publish_subscribe::PortFactory<AgpIpc, FloorMessage, ()>> {
                 let service: ServiceName = name
                     .try_into()
                     .map_err(|e| anyhow!("bad service name `{name}`: {e:?}"))?;
@@ -473,7 +474,7 @@ impl FloorPorts {
         } else {
             (&pong, &ping, &pong_ev, &ping_ev)
         };
-        let listener: Listener<ipc::Service> = in_ev
+        let listener: Listener<AgpIpc> = in_ev
             .listener_builder()
             .create()
             .map_err(|e| anyhow!("cannot create the floor's listener: {e:?}"))?;

@@ -4,10 +4,11 @@
 
 use std::time::{Duration, Instant};
 
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{Instance, IrFrame, MotorCommand};
 use anyhow::{Result, anyhow};
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ipc};
+use iceoryx2::prelude::Node;
 
 /// Samples kept per stream; with one every [`SAMPLE_EVERY`], the rate covers about a second.
 const WINDOW: usize = 11;
@@ -73,15 +74,15 @@ impl StepWindow {
 
 /// The rates of the instance's streams that `agp status` shows.
 pub(crate) struct MessageRates {
-    frames: Subscriber<ipc::Service, IrFrame, ()>,
-    commands: Subscriber<ipc::Service, MotorCommand, ()>,
+    frames: Subscriber<AgpIpc, IrFrame, ()>,
+    commands: Subscriber<AgpIpc, MotorCommand, ()>,
     frame_steps: StepWindow,
     /// Motor commands of the active epoch only: the planner that drives.
     command_steps: StepWindow,
 }
 
 impl MessageRates {
-    pub(crate) fn open(instance: &Instance, node: &Node<ipc::Service>) -> Result<Self> {
+    pub(crate) fn open(instance: &Instance, node: &Node<AgpIpc>) -> Result<Self> {
         let frames = instance
             .ir_frames(node)
             .map_err(|e| anyhow!("cannot open the IR frames: {e}"))?

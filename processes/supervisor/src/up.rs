@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+use agp_shared_types::AgpIpc;
 use agp_shared_types::{
     GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
     WaitStrategy,
@@ -13,7 +14,7 @@ use agp_shared_types::{
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
 use iceoryx2::node::{NodeState, NodeView};
-use iceoryx2::prelude::{CallbackProgression, Node, ipc};
+use iceoryx2::prelude::{CallbackProgression, Node};
 
 use agp_world::Scenario;
 
@@ -88,7 +89,7 @@ struct Services {
 }
 
 impl Services {
-    fn open(instance: &Instance, node: &Node<ipc::Service>) -> Result<Self> {
+    fn open(instance: &Instance, node: &Node<AgpIpc>) -> Result<Self> {
         Ok(Self {
             _ir_frames: instance.ir_frames(node).context("ir_frames")?,
             _ground_truth: instance.ground_truth(node).context("ground_truth")?,
@@ -319,7 +320,7 @@ fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
 /// The live iceoryx2 nodes of `instance`, as `name (pid N)`.
 fn alive_nodes(instance: &Instance) -> Vec<String> {
     let mut alive = Vec::new();
-    let listed = Node::<ipc::Service>::list(instance.config(), |state| {
+    let listed = Node::<AgpIpc>::list(instance.config(), |state| {
         if let NodeState::Alive(view) = state {
             alive.push(match view.details() {
                 Some(d) => format!("node `{}` (pid {})", d.name(), d.process_id()),
@@ -339,7 +340,7 @@ fn alive_nodes(instance: &Instance) -> Vec<String> {
 fn run(
     config: &LaunchConfig,
     slots: &mut [Slot<'_>],
-    node: &Node<ipc::Service>,
+    node: &Node<AgpIpc>,
     control: &mut ControlPlane,
     log: &Log,
 ) -> RunEnd {
@@ -415,7 +416,7 @@ impl Slot<'_> {
     fn poll(
         &mut self,
         config: &LaunchConfig,
-        node: &Node<ipc::Service>,
+        node: &Node<AgpIpc>,
         log: &Log,
         now: Instant,
         active_epoch: u64,

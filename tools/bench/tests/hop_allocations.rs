@@ -59,13 +59,17 @@ fn allocations_of_a_warm_run(instance: &Instance, strategy: Strategy) -> u64 {
         ..WaitConfig::new(strategy)
     };
     let stem = service_stem::<HopSmall>(strategy);
-    let node = instance.node("alloc-ping", false).expect("ping node");
+    let node = instance
+        .node_of::<iceoryx2::prelude::ipc::Service>("alloc-ping", false)
+        .expect("ping node");
     let ping = HopPorts::<HopSmall>::open(&node, &stem, Side::Ping).expect("ping ports");
 
     let pong_instance = instance.clone();
     let pong_stem = stem.clone();
     let pong = std::thread::spawn(move || {
-        let node = pong_instance.node("alloc-pong", false).expect("pong node");
+        let node = pong_instance
+            .node_of::<iceoryx2::prelude::ipc::Service>("alloc-pong", false)
+            .expect("pong node");
         let ports = HopPorts::<HopSmall>::open(&node, &pong_stem, Side::Pong).expect("pong ports");
         for _ in 0..2 {
             pong_loop(&ports, &config, &mut || Ok(())).expect("pong run");

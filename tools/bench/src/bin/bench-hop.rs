@@ -21,6 +21,7 @@ use agp_bench::hop::{
 use agp_shared_types::{Instance, install_shutdown_handler};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
+use iceoryx2::prelude::ipc;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Role {
@@ -212,7 +213,7 @@ fn run_one<P: HopPayload>(
     config: &WaitConfig,
 ) -> Result<Summary> {
     let node = instance
-        .node("hop-ping", false)
+        .node_of::<ipc::Service>("hop-ping", false)
         .map_err(|e| anyhow::anyhow!("{e:?}"))
         .context("create the ping node")?;
     let ports = HopPorts::<P>::open(&node, &service_stem::<P>(config.strategy), Side::Ping)
@@ -367,7 +368,7 @@ fn pong_run<P: HopPayload, F: FnMut() -> Result<(), HopError>>(
     liveness: &mut F,
 ) -> Result<()> {
     let node = instance
-        .node("hop-pong", false)
+        .node_of::<ipc::Service>("hop-pong", false)
         .map_err(|e| anyhow::anyhow!("{e:?}"))
         .context("create the pong node")?;
     let ports = HopPorts::<P>::open(&node, &service_stem::<P>(config.strategy), Side::Pong)
