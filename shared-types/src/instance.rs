@@ -494,6 +494,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
             match node
                 .service_builder(&event_name)
                 .event()
+                .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
                 .max_notifiers(16)
                 .max_listeners(qos.max_subscribers)
                 .max_nodes(16)

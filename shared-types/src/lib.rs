@@ -26,7 +26,7 @@ pub use instance::{
     instance_files_in,
 };
 pub use payloads::*;
-pub use service::{AgpIpc, PooledGuard, PooledRc};
+pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};
 pub use wait::{
     WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
     shutdown_requested,

@@ -34,6 +34,11 @@ use iceoryx2_cal::{
     shared_memory, static_storage, zero_copy_connection,
 };
 
+/// The largest event id of every event service of an instance. Processes notify with the
+/// default id 0 only, and each wait ends by sweeping the counters of every id up to this
+/// one: at iceoryx2's default of 255 that sweep took about 1.3 us of every receive.
+pub const EVENT_ID_MAX_VALUE: usize = 0;
+
 /// The iceoryx2 service type of every agp process (see the module documentation).
 #[derive(Debug, Clone)]
 pub struct AgpIpc {}

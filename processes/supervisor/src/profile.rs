@@ -460,6 +460,7 @@ impl FloorPorts {
                 .map_err(|e| anyhow!("bad service name `{name}`: {e:?}"))?;
             node.service_builder(&service)
                 .event()
+                .event_id_max_value(agp_shared_types::EVENT_ID_MAX_VALUE)
                 .max_notifiers(2)
                 .max_listeners(2)
                 .open_or_create()
