@@ -366,8 +366,16 @@ mod tests {
     /// Runs `f` with a listener and a notifier of one event service of a private instance,
     /// then checks the instance left no file behind.
     fn with_event(tag: &str, f: impl FnOnce(Listener<AgpIpc>, &Notifier<AgpIpc>)) {
+        /// Removes the instance's files however the test ends, a failed assertion included.
+        struct Cleanup<'a>(&'a Instance);
+        impl Drop for Cleanup<'_> {
+            fn drop(&mut self) {
+                let _ = self.0.remove_files();
+            }
+        }
         let instance = Instance::new(&format!("w{tag}{}", std::process::id())).expect("name");
         instance.remove_files().expect("clean start");
+        let cleanup = Cleanup(&instance);
         {
             let node = instance.node("wait-test", false).expect("node");
             let name: ServiceName = "wait-test.ev".try_into().expect("service name");
@@ -381,7 +389,7 @@ mod tests {
             let notifier = service.notifier_builder().create().expect("notifier");
             f(listener, &notifier);
         }
-        instance.remove_files().expect("remove the files");
+        drop(cleanup);
         assert!(instance.files().is_empty(), "left {:?}", instance.files());
     }
 

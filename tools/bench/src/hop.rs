@@ -7,8 +7,9 @@
 //! trip as the one-way latency. The pong side announces itself with [`READY_SEQ`] before
 //! the first ping, and the ping side ends a run with [`STOP_SEQ`].
 //!
-//! `bench-hop` runs this between itself and a re-executed copy of itself; `agp profile`
-//! runs the same floor next to the pipeline, with the pipeline's waiting strategy.
+//! `bench-hop` runs this between itself and a re-executed copy of itself, over iceoryx2's
+//! own `ipc::Service` (Unix-socket events, which a WaitSet can wait on). The pipeline's
+//! floor is `agp profile`'s, over the pipeline's own service type `AgpIpc`.
 //!
 //! Nothing in the measured loop allocates on our side: samples are loaned from shared
 //! memory, the histogram is sized before the loop. iceoryx2 0.10 itself allocates one `Rc`
