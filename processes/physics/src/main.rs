@@ -505,9 +505,9 @@ mod alloc_count {
     //! `agp-physics: steady-state heap allocations: loop L, simulation S, iceoryx2 I, over N steps after W warm-up steps`
     //!
     //! counting up to the end of the last applied step only (what shutdown allocates is not
-    //! a step's). iceoryx2 0.10 allocates one `Rc` per loaned sample
-    //! (`ChunkMutSharedState::new` in `Publisher::loan_uninit`, which `send_copy` also goes
-    //! through); physics loans two per step (ground truth and frame), so I is about 2 N.
+    //! a step's). I is 0: the bookkeeping of each loaned sample, an `Rc` per loan with
+    //! iceoryx2's own `ipc::Service`, comes from the pool of `AgpIpc`'s `PooledRc`. S is
+    //! about 2 N: rapier 0.36 allocates inside `PhysicsPipeline::step`.
 
     use std::alloc::{GlobalAlloc, Layout, System};
     use std::cell::Cell;
