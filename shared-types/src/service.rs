@@ -132,7 +132,6 @@ struct Inner<T> {
 /// `ArcThreadSafetyPolicy`.
 pub struct PooledRc<T> {
     inner: NonNull<Inner<T>>,
-    pooled: bool,
 }
 
 impl<T> PooledRc<T> {
@@ -153,14 +152,10 @@ impl<T> PooledRc<T> {
             let block = take_block()?.cast::<Inner<T>>();
             // SAFETY: the block is free, large and aligned enough for `Inner<T>`.
             unsafe { block.as_ptr().write(inner) };
-            Some(Self {
-                inner: block,
-                pooled: true,
-            })
+            Some(Self { inner: block })
         } else {
             Some(Self {
                 inner: NonNull::from(Box::leak(Box::new(inner))),
-                pooled: false,
             })
         }
     }
@@ -180,7 +175,7 @@ impl<T> PooledRc<T> {
     /// # Safety
     /// Called once, by the last reference, on the thread that made it.
     unsafe fn release(&self) {
-        if self.pooled {
+        if Self::fits_a_block() {
             unsafe { give_block(self.inner.cast()) };
         } else {
             drop(unsafe {
@@ -205,10 +200,7 @@ impl<T> Clone for PooledRc<T> {
     fn clone(&self) -> Self {
         let strong = &self.inner().strong;
         strong.set(strong.get() + 1);
-        Self {
-            inner: self.inner,
-            pooled: self.pooled,
-        }
+        Self { inner: self.inner }
     }
 }
 
@@ -335,7 +327,6 @@ mod tests {
     fn a_value_too_large_for_a_block_lives_on_the_heap() {
         assert!(!PooledRc::<[u8; 1024]>::fits_a_block());
         let big = PooledRc::try_new([3u8; 1024]).expect("memory");
-        assert!(!big.pooled);
         let again = big.clone();
         drop(big);
         assert_eq!(again[1023], 3);

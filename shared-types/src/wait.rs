@@ -108,6 +108,12 @@ impl WaitStrategy {
         }
     }
 
+    /// Whether a waiter with this strategy ever blocks on its listener (and so needs a
+    /// timer to end a block, and must take the notifications of input it found by polling).
+    pub fn blocks(&self) -> bool {
+        matches!(self, Self::Block | Self::SpinThenBlock { .. })
+    }
+
     pub fn name(&self) -> String {
         match self {
             Self::Spin => "spin".into(),
@@ -163,9 +169,10 @@ const SHORTEST_BLOCK: Duration = Duration::from_micros(50);
 impl Waiter {
     /// A waiter for `listener`, used on this thread (a listener never leaves its thread).
     pub fn new(listener: Listener<AgpIpc>, strategy: WaitStrategy) -> Self {
-        let timer = match strategy {
-            WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. } => DeadlineTimer::new(),
-            WaitStrategy::Spin | WaitStrategy::Yield => None,
+        let timer = if strategy.blocks() {
+            DeadlineTimer::new()
+        } else {
+            None
         };
         Self {
             listener,
@@ -188,7 +195,7 @@ impl Waiter {
         let start = Instant::now();
         loop {
             if let Some(v) = poll() {
-                if self.blocks() {
+                if self.strategy.blocks() {
                     // Senders notify every send, and a receiver that found its input by
                     // polling took no notification: the semaphore would count them all, and
                     // the first block after a long run would return at once and then take
@@ -244,14 +251,6 @@ impl Waiter {
                 let _ = self.listener.timed_wait(|_| {}, slice);
             }
         }
-    }
-
-    /// Whether this waiter ever blocks (so its senders' notifications must be taken).
-    fn blocks(&self) -> bool {
-        matches!(
-            self.strategy,
-            WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. }
-        )
     }
 
     /// Consumes pending notifications without blocking.
