@@ -1,10 +1,10 @@
 //! The supervisor's control service: `agp status` and `agp down` ask the running `agp up`
 //! of an instance through iceoryx2 request-response, never through files or signals.
 
-use crate::AgpIpc;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::request_response;
 
+use crate::AgpIpc;
 use crate::instance::Instance;
 
 /// Most processes a status reply lists.

@@ -1,6 +1,5 @@
 use std::time::Duration;
 
-use crate::AgpIpc;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -10,7 +9,7 @@ use crate::control::ActiveEpoch;
 use crate::instance::Instance;
 use crate::payloads::{GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset};
 use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
-use crate::{monotonic_ns, stage};
+use crate::{AgpIpc, monotonic_ns, stage};
 
 /// Why driving physics failed.
 #[derive(Debug, thiserror::Error)]

@@ -1,4 +1,3 @@
-use crate::AgpIpc;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -9,6 +8,7 @@ use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
+use crate::AgpIpc;
 use crate::payloads::{
     GradientGrid, GroundTruth, IrFrame, LearnEvent, LearnReport, MotorCommand, ObjectEstimate,
     Reset, Task,

@@ -18,11 +18,10 @@ use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
 use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
-    LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy, Waiter,
-    install_shutdown_handler, monotonic_ns, stage,
+    AgpIpc, GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind,
+    LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy,
+    Waiter, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};

@@ -4,9 +4,8 @@
 use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    ActiveEpoch, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
+    ActiveEpoch, AgpIpc, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
     WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested,
     stage,
 };

@@ -3,8 +3,9 @@
 use std::time::Duration;
 
 use agp_affordance::{AffordanceGradient, GridSetAssembler};
-use agp_shared_types::AgpIpc;
-use agp_shared_types::{DriveError, GradientGrid, Instance, WaitOutcome, WaitStrategy, Waiter};
+use agp_shared_types::{
+    AgpIpc, DriveError, GradientGrid, Instance, WaitOutcome, WaitStrategy, Waiter,
+};
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::Node;

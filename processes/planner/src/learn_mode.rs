@@ -30,10 +30,10 @@ use agp_planner::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase,
     PushRoutine, PushSettings,
 };
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport, LearnReportKind,
-    LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter, monotonic_ns, stage,
+    AgpIpc, DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
+    LearnReportKind, LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter,
+    monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};

@@ -7,10 +7,9 @@ mod task_mode;
 use std::time::Duration;
 
 use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver, Pose2,
-    TaskKind, install_shutdown_handler, monotonic_ns, stage,
+    AgpIpc, ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver,
+    Pose2, TaskKind, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, bail};

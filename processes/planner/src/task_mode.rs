@@ -23,9 +23,8 @@ use agp_planner::{
     EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
     trajectory_path,
 };
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    DriveError, Instance, LockstepDriver, MAX_PATH_POINTS, Pose2, TaskKind, stage,
+    AgpIpc, DriveError, Instance, LockstepDriver, MAX_PATH_POINTS, Pose2, TaskKind, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};

@@ -15,9 +15,8 @@ use std::path::PathBuf;
 use std::process::Child;
 use std::time::{Duration, Instant};
 
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
+    ActiveEpoch, AgpIpc, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
     MAX_STATUS_PROCESSES, ProcessState, Topic, read_str, write_str,
 };
 use anyhow::{Result, anyhow};

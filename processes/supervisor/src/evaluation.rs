@@ -11,8 +11,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use agp_planner::{EpisodeConfig, Evaluation, PoseSample, Task};
-use agp_shared_types::AgpIpc;
-use agp_shared_types::{GroundTruth, Instance, Pose2, TaskKind};
+use agp_shared_types::{AgpIpc, GroundTruth, Instance, Pose2, TaskKind};
 use agp_world::Scenario;
 use anyhow::{Result, anyhow, bail};
 use glam::DVec2;

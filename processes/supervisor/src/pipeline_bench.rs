@@ -10,8 +10,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_planner::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
-use agp_shared_types::AgpIpc;
-use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2};
+use agp_shared_types::{AgpIpc, DriveError, Instance, LockstepDriver, Pose2};
 use agp_world::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::prelude::Node;

@@ -30,10 +30,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    Instance, IrFrame, TimingHeader, WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler,
-    monotonic_ns, shutdown_requested, stage,
+    AgpIpc, Instance, IrFrame, TimingHeader, WaitOutcome, WaitStrategy, Waiter,
+    install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
 };
 use anyhow::{Context, Result, anyhow, bail};
 use hdrhistogram::Histogram;

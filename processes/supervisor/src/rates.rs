@@ -4,8 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use agp_shared_types::AgpIpc;
-use agp_shared_types::{Instance, IrFrame, MotorCommand};
+use agp_shared_types::{AgpIpc, Instance, IrFrame, MotorCommand};
 use anyhow::{Result, anyhow};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::Node;

@@ -6,10 +6,9 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::AgpIpc;
 use agp_shared_types::{
-    GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset, Task, Topic,
-    WaitStrategy,
+    AgpIpc, GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset,
+    Task, Topic, WaitStrategy,
 };
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
