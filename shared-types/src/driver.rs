@@ -214,6 +214,7 @@ impl LockstepDriver {
     /// waits until the supervisor made its epoch the active one, then takes the latest
     /// frame, the one physics waits to get this planner's command for.
     pub fn take_over(&mut self, timeout: Duration) -> Result<&IrFrame, DriveError> {
+        let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         let start = std::time::Instant::now();
         loop {
             let mut active = None;
@@ -281,6 +282,7 @@ impl LockstepDriver {
     /// frame of another physics run than the last one seen means physics restarted: that
     /// frame becomes the latest and this returns [`DriveError::PhysicsRestarted`].
     pub fn take_frame(&mut self) -> Result<Option<&IrFrame>, DriveError> {
+        let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         let Some(awaited) = self.awaited else {
             return Ok(Some(&self.frame));
         };
@@ -294,6 +296,7 @@ impl LockstepDriver {
     /// returns it; with nothing awaited, the latest frame. Ends with
     /// [`DriveError::PhysicsRestarted`] as [`LockstepDriver::take_frame`] does.
     pub fn await_frame(&mut self) -> Result<&IrFrame, DriveError> {
+        let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         let Some(awaited) = self.awaited else {
             return Ok(&self.frame);
         };
@@ -335,6 +338,7 @@ impl LockstepDriver {
                 }
             }
         }
+        crate::alloc_count::message_done();
         Ok(&self.frame)
     }
 
@@ -347,6 +351,7 @@ impl LockstepDriver {
     /// Publishes the motor command for the latest frame's step; the frame it makes is then
     /// taken with [`LockstepDriver::take_frame`] or [`LockstepDriver::await_frame`].
     pub fn send(&mut self, left_mps: f64, right_mps: f64) -> Result<(), DriveError> {
+        let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         let step = self.frame.step;
         let mut cmd = MotorCommand {
             step,
@@ -388,6 +393,7 @@ impl LockstepDriver {
     /// Publishes a reset (as [`LockstepDriver::reset`]); the frame of the reset world is
     /// then taken with [`LockstepDriver::take_frame`] or [`LockstepDriver::await_frame`].
     pub fn send_reset(&mut self, object: Pose2, robot: Pose2) -> Result<(), DriveError> {
+        let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         self.resets_sent += 1;
         // Unique per driver and reset, so an old frame is never taken for the new world.
         let seq = (monotonic_ns() & !0xffff) | (self.resets_sent & 0xffff);

@@ -8,6 +8,7 @@
 //!
 //! Units: SI inside (metres, seconds, radians), as in the rest of the code.
 
+pub mod alloc_count;
 mod control;
 mod driver;
 mod instance;

@@ -21,7 +21,7 @@ use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
 use agp_shared_types::{
     AgpIpc, GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind,
     LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy,
-    Waiter, install_shutdown_handler, monotonic_ns, stage,
+    Waiter, alloc_count, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
@@ -62,8 +62,16 @@ struct Args {
     idle_timeout_s: u64,
 }
 
+/// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
+/// [`agp_shared_types::alloc_count`]): the estimator's per-frame loop allocates none.
+#[global_allocator]
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
+
 fn main() {
-    if let Err(e) = run() {
+    alloc_count::enable_from_env();
+    let result = run();
+    alloc_count::report("agp-estimator", "learning", "frames");
+    if let Err(e) = result {
         eprintln!("agp-estimator: error: {e:#}");
         std::process::exit(1);
     }
@@ -417,23 +425,28 @@ impl State {
     }
 
     /// Handles what arrived: returns whether anything did. Each frame is preceded by the
-    /// events sent before it, and acknowledged once observed. Allocates nothing (beyond
-    /// iceoryx2's per-sample bookkeeping).
+    /// events sent before it, and acknowledged once observed. A frame allocates nothing
+    /// (`tests/tests/pipeline_allocations.rs` counts).
     fn poll(&mut self) -> Result<bool> {
         let mut any = self.drain_events()?;
         loop {
-            let frame = match self.frames.receive() {
-                Ok(Some(f)) => *f,
-                Ok(None) => break,
-                Err(e) => bail!("cannot receive an IR frame: {e:?}"),
+            let frame = {
+                let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
+                match self.frames.receive() {
+                    Ok(Some(f)) => *f,
+                    Ok(None) => break,
+                    Err(e) => bail!("cannot receive an IR frame: {e:?}"),
+                }
             };
             any = true;
             let received = monotonic_ns();
             self.drain_events()?;
             if let Some(s) = &mut self.session {
+                let _in_learning = alloc_count::enter(alloc_count::Region::Work);
                 s.observe(&IrView::from(&frame));
             }
             self.acknowledge(&frame, received)?;
+            alloc_count::message_done();
         }
         Ok(any)
     }
@@ -441,12 +454,16 @@ impl State {
     fn drain_events(&mut self) -> Result<bool> {
         let mut any = false;
         loop {
-            let event = match self.events.receive() {
-                Ok(Some(e)) => *e,
-                Ok(None) => return Ok(any),
-                Err(e) => bail!("cannot receive a learn event: {e:?}"),
+            let event = {
+                let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
+                match self.events.receive() {
+                    Ok(Some(e)) => *e,
+                    Ok(None) => return Ok(any),
+                    Err(e) => bail!("cannot receive a learn event: {e:?}"),
+                }
             };
             any = true;
+            let _in_learning = alloc_count::enter(alloc_count::Region::Work);
             self.handle(&event)?;
         }
     }
@@ -462,6 +479,7 @@ impl State {
         e.timing.stamps_ns[stage::FRAME_PUBLISHED] = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
         e.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] = received_ns;
         e.timing.stamps_ns[stage::ESTIMATE_PUBLISHED] = monotonic_ns();
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let sample = self
             .estimates
             .loan_uninit()
@@ -477,6 +495,7 @@ impl State {
     fn report(&mut self, mut r: LearnReport) -> Result<()> {
         self.report_seq += 1;
         r.seq = self.report_seq;
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let sample = self
             .reports
             .loan_uninit()

@@ -6,8 +6,8 @@ use std::time::{Duration, Instant};
 use agp_physics::{Sim, SimConfig};
 use agp_shared_types::{
     ActiveEpoch, AgpIpc, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
-    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, shutdown_requested,
-    stage,
+    WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler, monotonic_ns,
+    shutdown_requested, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -60,6 +60,11 @@ struct Args {
     #[arg(long)]
     step_log: Option<std::path::PathBuf>,
 }
+
+/// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
+/// [`agp_shared_types::alloc_count`]): physics's steady-state lockstep loop allocates none.
+#[global_allocator]
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 fn main() {
     alloc_count::enable_from_env();
@@ -309,7 +314,7 @@ impl Runner {
             }
         }
         if let Some(r) = last {
-            let _in_simulation = alloc_count::enter(alloc_count::Region::Simulation);
+            let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
             self.sim.reset(pose(r.object), pose(r.robot));
             self.reset_seq = r.seq;
             return Ok(true);
@@ -318,18 +323,12 @@ impl Runner {
     }
 
     fn lockstep(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
-        let mut counter = alloc_count::StepCounter::new();
-        let result = self.lockstep_loop(waiter, idle_timeout_s, &mut counter);
-        counter.report();
+        let result = self.lockstep_loop(waiter, idle_timeout_s);
+        alloc_count::report("agp-physics", "simulation", "steps");
         result
     }
 
-    fn lockstep_loop(
-        &mut self,
-        waiter: &Waiter,
-        idle_timeout_s: u64,
-        counter: &mut alloc_count::StepCounter,
-    ) -> Result<()> {
+    fn lockstep_loop(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
         let idle_limit = (idle_timeout_s > 0).then(|| Duration::from_secs(idle_timeout_s));
         // A subscriber that connects while physics waits gets the latest frame from history
         // only when the publisher updates its connections: do so at this period while idle.
@@ -409,13 +408,13 @@ impl Runner {
                         log.record(step, self.active_epoch)?;
                     }
                     {
-                        let _in_simulation = alloc_count::enter(alloc_count::Region::Simulation);
+                        let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
                         self.sim.step(l, r);
                     }
                     let applied = monotonic_ns();
                     cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
                     self.publish(applied, cause)?;
-                    counter.step_done();
+                    alloc_count::message_done();
                 }
             }
             if reset {
@@ -487,173 +486,6 @@ impl Runner {
             }
         }
         Ok(())
-    }
-}
-
-mod alloc_count {
-    //! A counting global allocator, the proof that the lockstep loop allocates nothing per
-    //! step.
-    //!
-    //! Off unless `AGP_COUNT_ALLOCS=1`: then every heap allocation (`alloc`, `alloc_zeroed`,
-    //! `realloc`) is counted, split by where it happened: inside a call into iceoryx2
-    //! ([`Region::Iceoryx2`]), inside the simulation library `agp_physics` and rapier
-    //! ([`Region::Simulation`]), or anywhere else in this binary's loop ([`Region::Loop`]).
-    //! After the first [`WARMUP_STEPS`] applied steps the counts are snapshotted, and at
-    //! exit physics prints to stderr, on one line:
-    //!
-    //! `agp-physics: steady-state heap allocations: loop L, simulation S, iceoryx2 I, over N steps after W warm-up steps`
-    //!
-    //! counting up to the end of the last applied step only (what shutdown allocates is not
-    //! a step's). I is 0: the bookkeeping of each loaned sample, an `Rc` per loan with
-    //! iceoryx2's own `ipc::Service`, comes from the pool of `AgpIpc`'s `PooledRc`. S is
-    //! about 2 N: rapier 0.36 allocates inside `PhysicsPipeline::step`.
-
-    use std::alloc::{GlobalAlloc, Layout, System};
-    use std::cell::Cell;
-    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
-    /// Applied steps before the counting starts: room for lazy first-use allocations.
-    pub const WARMUP_STEPS: u64 = 500;
-
-    /// The environment variable that turns counting on.
-    pub const ENV: &str = "AGP_COUNT_ALLOCS";
-
-    /// Where an allocation happened.
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    pub enum Region {
-        Loop = 0,
-        Simulation = 1,
-        Iceoryx2 = 2,
-    }
-
-    static ENABLED: AtomicBool = AtomicBool::new(false);
-    static COUNTS: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
-
-    thread_local! {
-        /// The region this thread is in.
-        static REGION: Cell<Region> = const { Cell::new(Region::Loop) };
-    }
-
-    struct Counting;
-
-    impl Counting {
-        #[inline]
-        fn count(&self) {
-            if ENABLED.load(Ordering::Relaxed) {
-                let region = REGION.try_with(Cell::get).unwrap_or(Region::Loop);
-                COUNTS[region as usize].fetch_add(1, Ordering::Relaxed);
-            }
-        }
-    }
-
-    // SAFETY: every call is forwarded unchanged to the system allocator; counting touches
-    // only atomics and a const-initialised thread-local, neither of which allocates.
-    unsafe impl GlobalAlloc for Counting {
-        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-            self.count();
-            // SAFETY: forwarded with the caller's guarantees.
-            unsafe { System.alloc(layout) }
-        }
-
-        unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-            self.count();
-            // SAFETY: forwarded with the caller's guarantees.
-            unsafe { System.alloc_zeroed(layout) }
-        }
-
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-            // SAFETY: forwarded with the caller's guarantees.
-            unsafe { System.dealloc(ptr, layout) }
-        }
-
-        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-            self.count();
-            // SAFETY: forwarded with the caller's guarantees.
-            unsafe { System.realloc(ptr, layout, new_size) }
-        }
-    }
-
-    #[global_allocator]
-    static GLOBAL: Counting = Counting;
-
-    /// Turns counting on when `AGP_COUNT_ALLOCS=1`.
-    pub fn enable_from_env() {
-        if std::env::var(ENV).is_ok_and(|v| v == "1") {
-            ENABLED.store(true, Ordering::Relaxed);
-        }
-    }
-
-    fn counts() -> [u64; 3] {
-        [0, 1, 2].map(|i| COUNTS[i].load(Ordering::Relaxed))
-    }
-
-    /// Counts what is allocated in `region` until the guard is dropped.
-    #[inline]
-    pub fn enter(region: Region) -> RegionGuard {
-        RegionGuard {
-            before: REGION.with(|c| c.replace(region)),
-        }
-    }
-
-    /// Puts the region back as it was when dropped.
-    pub struct RegionGuard {
-        before: Region,
-    }
-
-    impl Drop for RegionGuard {
-        #[inline]
-        fn drop(&mut self) {
-            REGION.with(|c| c.set(self.before));
-        }
-    }
-
-    /// The steady-state counts of one lockstep run.
-    pub struct StepCounter {
-        steps: u64,
-        /// Counts at the end of the warm-up.
-        base: [u64; 3],
-        /// Counts at the end of the last applied step.
-        last: [u64; 3],
-    }
-
-    impl StepCounter {
-        pub fn new() -> Self {
-            Self {
-                steps: 0,
-                base: [0; 3],
-                last: [0; 3],
-            }
-        }
-
-        /// Called after each applied step (its frame published).
-        #[inline]
-        pub fn step_done(&mut self) {
-            if !ENABLED.load(Ordering::Relaxed) {
-                return;
-            }
-            self.steps += 1;
-            if self.steps == WARMUP_STEPS {
-                self.base = counts();
-                self.last = self.base;
-            } else if self.steps > WARMUP_STEPS {
-                self.last = counts();
-            }
-        }
-
-        /// Prints the steady-state counts to stderr, when counting.
-        pub fn report(&self) {
-            if !ENABLED.load(Ordering::Relaxed) {
-                return;
-            }
-            let counted = self.steps.saturating_sub(WARMUP_STEPS);
-            let d = |r: Region| self.last[r as usize] - self.base[r as usize];
-            eprintln!(
-                "agp-physics: steady-state heap allocations: loop {}, simulation {}, iceoryx2 {}, over {counted} steps after {WARMUP_STEPS} warm-up steps",
-                d(Region::Loop),
-                d(Region::Simulation),
-                d(Region::Iceoryx2),
-            );
-        }
     }
 }
 

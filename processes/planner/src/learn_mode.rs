@@ -33,7 +33,7 @@ use agp_planner::{
 use agp_shared_types::{
     AgpIpc, DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
     LearnReportKind, LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter,
-    monotonic_ns, stage,
+    alloc_count, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};
@@ -182,6 +182,7 @@ impl EstimatorLink {
     /// estimate of `frame` itself and when it was received (CLOCK_MONOTONIC), once: the
     /// command answering `frame` carries its stamps.
     fn ack(&mut self, frame: &IrFrame) -> Result<Option<(ObjectEstimate, u64)>> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let stamp = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
         if self.acked_stamp < stamp {
             let estimates = &self.estimates;
@@ -211,6 +212,7 @@ impl EstimatorLink {
 
     /// Sends one event about `frame`.
     fn send(&mut self, mut event: LearnEvent, frame: &IrFrame) -> Result<()> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.seq += 1;
         event.seq = self.seq;
         event.step = frame.step;
@@ -231,6 +233,7 @@ impl EstimatorLink {
 
     /// Takes the reports that arrived; returns the first of `wanted` kind among them.
     fn drain_reports(&mut self, wanted: Option<LearnReportKind>) -> Option<LearnReport> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let mut found = None;
         while let Ok(Some(r)) = self.reports.receive() {
             let kind = LearnReportKind::from_u32(r.kind);
@@ -254,6 +257,7 @@ impl EstimatorLink {
 
     /// Waits up to `timeout` for a report of one of `kinds`.
     fn wait_report(&mut self, kinds: &[LearnReportKind], timeout: Duration) -> Result<LearnReport> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let start = std::time::Instant::now();
         loop {
             let mut found = None;
@@ -333,12 +337,14 @@ impl Learner<'_> {
     }
 
     fn step(&mut self, l: f64, r: f64) -> Result<IrFrame> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.driver.send(l, r)?;
         let next = self.driver.frame().step + 1;
         self.next_frame(next)
     }
 
     fn reset(&mut self, robot: Pose2) -> Result<IrFrame> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.driver.send_reset(self.object0, robot)?;
         let same = self.driver.frame().step;
         self.next_frame(same)

@@ -9,7 +9,7 @@ use std::time::Duration;
 use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_shared_types::{
     AgpIpc, ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver,
-    Pose2, TaskKind, install_shutdown_handler, monotonic_ns, stage,
+    Pose2, TaskKind, alloc_count, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, bail};
@@ -158,8 +158,21 @@ fn parse_goal(s: &str) -> Result<Pose2, String> {
     }
 }
 
+/// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
+/// [`agp_shared_types::alloc_count`]).
+#[global_allocator]
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
+
 fn main() {
-    if let Err(e) = run() {
+    alloc_count::enable_from_env();
+    let result = {
+        // Everything but the calls into iceoryx2 (booked by the lockstep driver and the
+        // estimator link) is the planner's own work.
+        let _planning = alloc_count::enter(alloc_count::Region::Work);
+        run()
+    };
+    alloc_count::report("agp-planner", "planning", "frames");
+    if let Err(e) = result {
         eprintln!("agp-planner: error: {e:#}");
         std::process::exit(1);
     }

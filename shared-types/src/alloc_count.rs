@@ -1,0 +1,188 @@
+//! A counting global allocator: the proof that a process's steady-state loop allocates
+//! nothing per message.
+//!
+//! A process binary installs it with
+//!
+//! ```ignore
+//! #[global_allocator]
+//! static ALLOCATOR: agp_shared_types::alloc_count::Counting = agp_shared_types::alloc_count::Counting;
+//! ```
+//!
+//! and calls [`enable_from_env`] first thing. Counting is off unless `AGP_COUNT_ALLOCS=1`
+//! (then every `alloc`, `alloc_zeroed` and `realloc` costs a relaxed atomic add; off, one
+//! relaxed load). Each allocation is booked to the [`Region`] its thread is in: inside a
+//! call into iceoryx2, inside the process's own work (the simulation, the learning, the
+//! planning), or anywhere else in its loop. The loop calls [`message_done`] once per message
+//! it handled (a step applied, a frame observed); after the first [`WARMUP_MESSAGES`] the
+//! counts are snapshotted, and [`report`] prints, on one line of stderr:
+//!
+//! `agp-physics: steady-state heap allocations: loop L, simulation S, iceoryx2 I, over N steps after W warm-up steps, in K of them`
+//!
+//! counting up to the end of the last message only (what shutdown allocates is no
+//! message's). K is the number of messages during which anything was allocated: a few
+//! allocations at the start of each trial show as a small K, one per message as K = N.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+/// Messages before the counting starts: room for lazy first-use allocations.
+pub const WARMUP_MESSAGES: u64 = 500;
+
+/// The environment variable that turns counting on (value `1`).
+pub const ENV: &str = "AGP_COUNT_ALLOCS";
+
+/// Where an allocation happened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Region {
+    /// The process's loop: anything not in the two regions below.
+    Loop = 0,
+    /// The process's own work on a message: the simulation step, the learning session's
+    /// observation, the planner's decision.
+    Work = 1,
+    /// A call into iceoryx2: a loan, a send, a receive, a wait.
+    Iceoryx2 = 2,
+}
+
+static ENABLED: AtomicBool = AtomicBool::new(false);
+static COUNTS: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
+
+thread_local! {
+    /// The region this thread is in.
+    static REGION: Cell<Region> = const { Cell::new(Region::Loop) };
+}
+
+/// The counting allocator: forwards every call to the system allocator.
+pub struct Counting;
+
+impl Counting {
+    #[inline]
+    fn count(&self) {
+        if ENABLED.load(Ordering::Relaxed) {
+            let region = REGION.try_with(Cell::get).unwrap_or(Region::Loop);
+            COUNTS[region as usize].fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only
+// atomics and a const-initialised thread-local, neither of which allocates.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        self.count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        self.count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        self.count();
+        // SAFETY: forwarded with the caller's guarantees.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+/// Turns counting on when `AGP_COUNT_ALLOCS=1`. Without [`Counting`] installed as the
+/// global allocator the counts stay 0 and [`report`] says nothing.
+pub fn enable_from_env() {
+    if std::env::var(ENV).is_ok_and(|v| v == "1") {
+        ENABLED.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Whether counting is on.
+pub fn enabled() -> bool {
+    ENABLED.load(Ordering::Relaxed)
+}
+
+fn counts() -> [u64; 3] {
+    [0, 1, 2].map(|i| COUNTS[i].load(Ordering::Relaxed))
+}
+
+/// Books what this thread allocates to `region` until the guard is dropped.
+#[inline]
+pub fn enter(region: Region) -> RegionGuard {
+    RegionGuard {
+        before: REGION.with(|c| c.replace(region)),
+    }
+}
+
+/// Puts the thread's region back as it was, when dropped.
+#[must_use = "the region ends when the guard is dropped"]
+pub struct RegionGuard {
+    before: Region,
+}
+
+impl Drop for RegionGuard {
+    #[inline]
+    fn drop(&mut self) {
+        REGION.with(|c| c.set(self.before));
+    }
+}
+
+/// Messages handled so far, counts at the end of the warm-up and of the last message, and
+/// how many counted messages allocated: the process's one message loop writes them (from
+/// one thread), [`report`] reads them at exit.
+static MESSAGES: AtomicU64 = AtomicU64::new(0);
+static ALLOCATING: AtomicU64 = AtomicU64::new(0);
+static BASE: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
+static LAST: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)];
+
+/// Called once per message the loop handled. Allocates nothing.
+#[inline]
+pub fn message_done() {
+    if !ENABLED.load(Ordering::Relaxed) {
+        return;
+    }
+    let n = MESSAGES.fetch_add(1, Ordering::Relaxed) + 1;
+    let now = counts();
+    if n == WARMUP_MESSAGES {
+        for i in 0..3 {
+            BASE[i].store(now[i], Ordering::Relaxed);
+            LAST[i].store(now[i], Ordering::Relaxed);
+        }
+    } else if n > WARMUP_MESSAGES {
+        let mut changed = false;
+        for i in 0..3 {
+            changed |= LAST[i].swap(now[i], Ordering::Relaxed) != now[i];
+        }
+        if changed {
+            ALLOCATING.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The steady-state counts so far: allocations per region (indexed by [`Region`]), the
+/// messages counted and how many of them allocated.
+pub fn steady_state() -> ([u64; 3], u64, u64) {
+    let d = [0, 1, 2].map(|i| LAST[i].load(Ordering::Relaxed) - BASE[i].load(Ordering::Relaxed));
+    let counted = MESSAGES
+        .load(Ordering::Relaxed)
+        .saturating_sub(WARMUP_MESSAGES);
+    (d, counted, ALLOCATING.load(Ordering::Relaxed))
+}
+
+/// Prints the steady-state line to stderr when counting: `process` names the binary,
+/// `work` the [`Region::Work`] region, `unit` the messages (plural).
+pub fn report(process: &str, work: &str, unit: &str) {
+    if !enabled() {
+        return;
+    }
+    let (d, counted, allocating) = steady_state();
+    eprintln!(
+        "{process}: steady-state heap allocations: loop {}, {work} {}, iceoryx2 {}, over {counted} {unit} after {WARMUP_MESSAGES} warm-up {unit}, in {allocating} of them",
+        d[Region::Loop as usize],
+        d[Region::Work as usize],
+        d[Region::Iceoryx2 as usize],
+    );
+}
