@@ -545,3 +545,60 @@ pub fn assert_placed(results: &Path, instance: &str, scenario: &str, stdout: &st
     );
     (mm, deg)
 }
+
+/// A launch file of the learning phase over the real pipeline on the triangle, in
+/// lockstep: physics, `agp-estimator`, and `agp-planner --mode learn` with
+/// `trials_per_alpha` (its end ends the run). `env` goes into every process's table as is
+/// (such as `env = { AGP_COUNT_ALLOCS = "1" }`), or nothing when empty.
+pub fn triangle_learning_launch(instance: &str, trials_per_alpha: u32, env: &str) -> String {
+    let env = if env.is_empty() {
+        String::new()
+    } else {
+        format!("{env}\n")
+    };
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n{env}\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\n{env}\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n{env}\
+         args = [\"--mode\", \"learn\", \"--trials-per-alpha\", \"{trials_per_alpha}\"]\n\
+         ends_run = true\n"
+    )
+}
+
+/// One process's steady-state allocation line (`agp_shared_types::alloc_count::report`).
+#[derive(Debug, Clone, Copy)]
+pub struct AllocCounts {
+    /// In the process's loop.
+    pub looping: u64,
+    /// In its own work (named by the line: simulation, learning, planning).
+    pub work: u64,
+    pub iceoryx2: u64,
+    /// Messages counted, after the warm-up.
+    pub messages: u64,
+    /// Messages in which anything was allocated.
+    pub allocating: u64,
+}
+
+/// The steady-state allocation line `process` printed in `output`, its own work named
+/// `work`, if there is one.
+pub fn alloc_counts(output: &str, process: &str, work: &str) -> Option<AllocCounts> {
+    let prefix = format!("{process}: steady-state heap allocations: ");
+    let line = output
+        .lines()
+        .find_map(|l| l.find(&prefix).map(|at| &l[at + prefix.len()..]))?;
+    let number_after = |key: &str| -> Option<u64> {
+        let (_, rest) = line.split_once(key)?;
+        rest.split(|c: char| !c.is_ascii_digit())
+            .find(|s| !s.is_empty())?
+            .parse()
+            .ok()
+    };
+    Some(AllocCounts {
+        looping: number_after("loop ")?,
+        work: number_after(&format!(", {work} "))?,
+        iceoryx2: number_after("iceoryx2 ")?,
+        messages: number_after("over ")?,
+        allocating: number_after(", in ")?,
+    })
+}

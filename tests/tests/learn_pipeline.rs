@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{GRID_CELLS, GRID_SIDE, GRIDS_PER_ALPHA, GridKind, Instance};
-use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files};
+use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, triangle_learning_launch};
 use agp_world::{ObjectShape, Scenario};
 
 /// Safety net of every wait; the checks never depend on it.
@@ -31,17 +31,6 @@ const ALPHAS_DEG: [i32; 3] = [-15, 0, 15];
 
 /// Grids of one publication: every kind of every alpha.
 const SET_GRIDS: usize = GRIDS_PER_ALPHA * ALPHAS_DEG.len();
-
-fn launch(instance: &str) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"learn\", \"--trials-per-alpha\", \"{TRIALS_PER_ALPHA}\"]\n\
-         ends_run = true\n"
-    )
-}
 
 /// What the test keeps of one received grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -343,7 +332,7 @@ fn load_grids(instance: &str, file: &Path) -> BTreeMap<(u32, i32), GridSeen> {
 #[test]
 fn the_learning_phase_over_three_processes_publishes_and_saves_the_triangles_gradients() {
     let name = "t-learn-pipe";
-    let dir = LaunchDir::new(&launch(name));
+    let dir = LaunchDir::new(&triangle_learning_launch(name, TRIALS_PER_ALPHA, ""));
     let mut up = AgpUp::start(&dir.launch(), &[]);
     up.wait_for_lines("started", 3, TIMEOUT);
 

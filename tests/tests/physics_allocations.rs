@@ -2,54 +2,23 @@
 //! allocator (`AGP_COUNT_ALLOCS=1`) says so at exit, after a few thousand steps of a push
 //! driven over real shared memory as the planner drives them. Steady means the robot keeps
 //! touching the object: a contact that begins or ends costs rapier an allocation or two
-//! (a narrow-phase pair's first manifold, a broad-phase pair), which is not per step.
+//! (its begin/end-touch list, a broad-phase pair), which is not per step.
 
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use agp_shared_types::alloc_count::WARMUP_MESSAGES;
 use agp_shared_types::{Instance, LockstepDriver, Pose2};
-use agp_tests::bin_path;
+use agp_tests::{AllocCounts, alloc_counts, bin_path};
 
-/// Steps driven; physics counts those after its first 500.
+/// Steps driven; physics counts those after its first `WARMUP_MESSAGES`.
 const STEPS: u64 = 3000;
-
-/// Physics's steady-state line: allocations in its loop, in the simulation library, in
-/// iceoryx2, and the steps counted.
-#[derive(Debug, Clone, Copy)]
-struct Counts {
-    looping: u64,
-    simulation: u64,
-    iceoryx2: u64,
-    steps: u64,
-}
-
-fn parse(stderr: &str) -> Option<Counts> {
-    let line = stderr
-        .lines()
-        .find(|l| l.contains("steady-state heap allocations"))?;
-    let number_after = |key: &str| -> Option<u64> {
-        let (_, rest) = line.split_once(key)?;
-        rest.split(|c: char| !c.is_ascii_digit())
-            .find(|s| !s.is_empty())?
-            .parse()
-            .ok()
-    };
-    Some(Counts {
-        looping: number_after("loop ")?,
-        simulation: number_after("simulation ")?,
-        iceoryx2: number_after("iceoryx2 ")?,
-        steps: number_after("over ")?,
-    })
-}
-
-/// Steps physics leaves out of its count (its `WARMUP_STEPS`).
-const WARMUP: u64 = 500;
 
 /// Runs a private lockstep physics with counting on, drives `STEPS` steps of a push as the
 /// planner would (checking, by the ground truth, that the robot touches the object in
 /// every counted step), stops it, and returns its counts.
-fn drive_and_count(tag: &str) -> Counts {
+fn drive_and_count(tag: &str) -> AllocCounts {
     let instance = Instance::new(&format!("{tag}-{}", std::process::id())).expect("name");
     instance.remove_files().expect("clean start");
     let mut child = Command::new(bin_path("agp-physics"))
@@ -84,7 +53,7 @@ fn drive_and_count(tag: &str) -> Counts {
             let turn = if (k / 400) % 2 == 0 { 0.004 } else { -0.004 };
             driver.step(0.08 + turn, 0.08 - turn).expect("a step");
             let truth = driver.truth();
-            if k + 1 >= WARMUP && truth.contact != 1 {
+            if k + 1 >= WARMUP_MESSAGES && truth.contact != 1 {
                 lost_contact = Some(format!(
                     "the robot lost the object at step {k}: robot {:?}, object {:?}",
                     truth.robot, truth.object
@@ -113,11 +82,12 @@ fn drive_and_count(tag: &str) -> Counts {
         panic!("{lost}");
     }
     eprintln!("{}", text.trim());
-    let counts = parse(&text).unwrap_or_else(|| panic!("no allocation count from physics: {text}"));
+    let counts = alloc_counts(&text, "agp-physics", "simulation")
+        .unwrap_or_else(|| panic!("no allocation count from physics: {text}"));
     assert!(
-        counts.steps >= STEPS - 600,
+        counts.messages >= STEPS - 600,
         "only {} steps counted of {STEPS}",
-        counts.steps
+        counts.messages
     );
     counts
 }
@@ -128,14 +98,14 @@ fn physics_loop_and_iceoryx2_allocate_nothing_per_lockstep_step() {
     assert_eq!(
         c.looping, 0,
         "physics's loop allocated {} times in {} steady-state steps",
-        c.looping, c.steps
+        c.looping, c.messages
     );
     // Two loans a step (the IR frame, the ground truth), a command received, the wait: the
     // loans' bookkeeping comes from the pool of `AgpIpc`'s policy, not the heap.
     assert_eq!(
         c.iceoryx2, 0,
         "iceoryx2 allocated {} times in {} steady-state steps",
-        c.iceoryx2, c.steps
+        c.iceoryx2, c.messages
     );
 }
 
@@ -145,11 +115,11 @@ fn physics_loop_and_iceoryx2_allocate_nothing_per_lockstep_step() {
 fn the_simulation_step_allocates_nothing_per_lockstep_step() {
     let c = drive_and_count("t-alloc-sim");
     assert_eq!(
-        c.simulation,
+        c.work,
         0,
         "Sim::step allocated {} times in {} steady-state steps ({:.2} per step)",
-        c.simulation,
-        c.steps,
-        c.simulation as f64 / c.steps.max(1) as f64
+        c.work,
+        c.messages,
+        c.work as f64 / c.messages.max(1) as f64
     );
 }

@@ -13,7 +13,7 @@
 
 use std::time::Duration;
 
-use agp_tests::{AgpUp, LaunchDir, count_instance_files};
+use agp_tests::{AgpUp, LaunchDir, alloc_counts, count_instance_files, triangle_learning_launch};
 
 /// Safety net of the run; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(300);
@@ -21,54 +21,14 @@ const TIMEOUT: Duration = Duration::from_secs(300);
 const TRIALS_PER_ALPHA: u32 = 6;
 const TRIALS: u64 = 3 * TRIALS_PER_ALPHA as u64;
 
-fn launch(instance: &str) -> String {
-    let counting = "env = { AGP_COUNT_ALLOCS = \"1\" }";
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n{counting}\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\n{counting}\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n{counting}\n\
-         args = [\"--mode\", \"learn\", \"--trials-per-alpha\", \"{TRIALS_PER_ALPHA}\"]\n\
-         ends_run = true\n"
-    )
-}
-
-/// One process's steady-state line.
-#[derive(Debug, Clone, Copy)]
-struct Counts {
-    looping: u64,
-    work: u64,
-    iceoryx2: u64,
-    messages: u64,
-    allocating: u64,
-}
-
-/// The steady-state line `process` printed, if any.
-fn counts(output: &str, process: &str, work: &str) -> Option<Counts> {
-    let prefix = format!("{process}: steady-state heap allocations: ");
-    let line = output
-        .lines()
-        .find_map(|l| l.find(&prefix).map(|at| &l[at + prefix.len()..]))?;
-    let number_after = |key: &str| -> Option<u64> {
-        let (_, rest) = line.split_once(key)?;
-        rest.split(|c: char| !c.is_ascii_digit())
-            .find(|s| !s.is_empty())?
-            .parse()
-            .ok()
-    };
-    Some(Counts {
-        looping: number_after("loop ")?,
-        work: number_after(&format!(", {work} "))?,
-        iceoryx2: number_after("iceoryx2 ")?,
-        messages: number_after("over ")?,
-        allocating: number_after(", in ")?,
-    })
-}
-
 #[test]
 fn the_learning_pipeline_allocates_per_trial_never_per_message() {
     let name = format!("t-palloc-{}", std::process::id());
-    let dir = LaunchDir::new(&launch(&name));
+    let dir = LaunchDir::new(&triangle_learning_launch(
+        &name,
+        TRIALS_PER_ALPHA,
+        "env = { AGP_COUNT_ALLOCS = \"1\" }",
+    ));
     let up = AgpUp::start(&dir.launch(), &[]);
     let run = up.wait(TIMEOUT);
     let output = format!("{}\n{}", run.stdout, run.stderr);
@@ -84,7 +44,7 @@ fn the_learning_pipeline_allocates_per_trial_never_per_message() {
         // Learning done, a listener connecting (1 frame in the whole run measured).
         ("agp-estimator", "learning", "frames", 1),
     ] {
-        let Some(c) = counts(&output, process, work) else {
+        let Some(c) = alloc_counts(&output, process, work) else {
             failures.push(format!("{process} printed no steady-state line"));
             continue;
         };
