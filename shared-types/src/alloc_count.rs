@@ -1,26 +1,35 @@
 //! A counting global allocator: the proof that a process's steady-state loop allocates
 //! nothing per message.
 //!
-//! A process binary installs it with
+//! A process binary installs it and turns it on first thing:
 //!
-//! ```ignore
+//! ```
+//! use agp_shared_types::alloc_count;
+//!
 //! #[global_allocator]
-//! static ALLOCATOR: agp_shared_types::alloc_count::Counting = agp_shared_types::alloc_count::Counting;
+//! static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
+//!
+//! fn main() {
+//!     alloc_count::enable_from_env();
+//!     // ... the loop, calling `alloc_count::message_done()` once per message ...
+//!     alloc_count::report("agp-example", "work", "messages");
+//! }
 //! ```
 //!
-//! and calls [`enable_from_env`] first thing. Counting is off unless `AGP_COUNT_ALLOCS=1`
-//! (then every `alloc`, `alloc_zeroed` and `realloc` costs a relaxed atomic add; off, one
-//! relaxed load). Each allocation is booked to the [`Region`] its thread is in: inside a
-//! call into iceoryx2, inside the process's own work (the simulation, the learning, the
-//! planning), or anywhere else in its loop. The loop calls [`message_done`] once per message
-//! it handled (a step applied, a frame observed); after the first [`WARMUP_MESSAGES`] the
-//! counts are snapshotted, and [`report`] prints, on one line of stderr:
+//! Counting is off unless `AGP_COUNT_ALLOCS=1` (then every `alloc`, `alloc_zeroed` and
+//! `realloc` costs a relaxed atomic add; off, one relaxed load). Each allocation is booked
+//! to the [`Region`] its thread is in: inside a call into iceoryx2, inside the process's own
+//! work (the simulation, the learning, the planning), or anywhere else in its loop. The loop
+//! calls [`message_done`] once per message it handled (a step applied, a frame observed);
+//! after the first [`WARMUP_MESSAGES`] the counts are snapshotted, and [`report`] prints, on
+//! one line of stderr:
 //!
 //! `agp-physics: steady-state heap allocations: loop L, simulation S, iceoryx2 I, over N steps after W warm-up steps, in K of them`
 //!
 //! counting up to the end of the last message only (what shutdown allocates is no
-//! message's). K is the number of messages during which anything was allocated: a few
-//! allocations at the start of each trial show as a small K, one per message as K = N.
+//! message's). K is the number of messages during which anything was allocated: a buffer
+//! growing once shows as a small K that stays put however long the run, one allocation per
+//! message as K = N.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

@@ -1,8 +1,8 @@
 //! Physics's lockstep loop allocates nothing per step in the steady state: its counting
 //! allocator (`AGP_COUNT_ALLOCS=1`) says so at exit, after a few thousand steps of a push
-//! driven over real shared memory as the planner drives them. Steady means the robot keeps
-//! touching the object: a contact that begins or ends costs rapier an allocation or two
-//! (its begin/end-touch list, a broad-phase pair), which is not per step.
+//! driven over real shared memory as the planner drives them, the contact holding in every
+//! counted step. (Rapier grows a few workspaces the first time a contact begins or a pair
+//! leaves its broad phase; `tests/tests/pipeline_allocations.rs` covers whole trials.)
 
 use std::io::Read;
 use std::process::{Command, Stdio};

@@ -4,12 +4,14 @@
 //! phase on the triangle: a shape circling and 18 trials, some 150,000 lockstep steps, every
 //! one passing through all three processes.
 //!
-//! What may allocate is what happens a few times a trial, never once a message: physics when
-//! a contact begins or ends (rapier's new pair), the planner when a trial begins (its routines
-//! for the trial), iceoryx2 when a port connects to a new listener, the estimator when
-//! learning is done. Each process reports how many of its counted messages allocated at all;
-//! the bounds below are per trial, so one allocation per message (150,000 of them) fails by
-//! three orders of magnitude.
+//! What may allocate happens once in a run, not once a message or a trial: a workspace of
+//! rapier's reaching its working size the first time something happens after the warm-up,
+//! a notifier meeting a listener that connected late, the estimator turning its session
+//! into the gradient when learning is done. Each process reports in how many of its
+//! counted messages anything was allocated; the bound below is a handful in the whole run.
+//! One allocation per trial (18 here) or per message (150,000) fails. The whole learning
+//! phase (180 trials, 1.46 million steps) gives the same counts as this short one
+//! (README, Benchmarks).
 
 use std::time::Duration;
 
@@ -19,10 +21,13 @@ use agp_tests::{AgpUp, LaunchDir, alloc_counts, count_instance_files, triangle_l
 const TIMEOUT: Duration = Duration::from_secs(300);
 
 const TRIALS_PER_ALPHA: u32 = 6;
-const TRIALS: u64 = 3 * TRIALS_PER_ALPHA as u64;
+
+/// Messages of a whole run in which a process may allocate at all (measured: physics 4,
+/// planner 1, estimator 1).
+const ALLOCATING_AT_MOST: u64 = 8;
 
 #[test]
-fn the_learning_pipeline_allocates_per_trial_never_per_message() {
+fn the_learning_pipeline_allocates_in_a_handful_of_messages_in_all() {
     let name = format!("t-palloc-{}", std::process::id());
     let dir = LaunchDir::new(&triangle_learning_launch(
         &name,
@@ -36,13 +41,10 @@ fn the_learning_pipeline_allocates_per_trial_never_per_message() {
     assert_eq!(count_instance_files(&name), 0, "the run left files behind");
 
     let mut failures = Vec::new();
-    for (process, work, unit, per_trial) in [
-        // A push's contact begins and ends, the circling's too (about 7 a trial measured).
-        ("agp-physics", "simulation", "steps", 12),
-        // A new trial's routines and plan (about 2 frames a trial measured).
-        ("agp-planner", "planning", "frames", 4),
-        // Learning done, a listener connecting (1 frame in the whole run measured).
-        ("agp-estimator", "learning", "frames", 1),
+    for (process, work, unit) in [
+        ("agp-physics", "simulation", "steps"),
+        ("agp-planner", "planning", "frames"),
+        ("agp-estimator", "learning", "frames"),
     ] {
         let Some(c) = alloc_counts(&output, process, work) else {
             failures.push(format!("{process} printed no steady-state line"));
@@ -58,10 +60,9 @@ fn the_learning_pipeline_allocates_per_trial_never_per_message() {
                 c.looping, c.messages
             ));
         }
-        let bound = per_trial * (TRIALS + 1);
-        if c.allocating > bound {
+        if c.allocating > ALLOCATING_AT_MOST {
             failures.push(format!(
-                "{process}: {} of {} {unit} allocated ({} in its work, {} in iceoryx2); at most {bound} may, {per_trial} per trial",
+                "{process}: {} of {} {unit} allocated ({} in its work, {} in iceoryx2); at most {ALLOCATING_AT_MOST} may",
                 c.allocating, c.messages, c.work, c.iceoryx2
             ));
         }

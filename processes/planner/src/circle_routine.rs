@@ -175,11 +175,17 @@ pub struct CircleRoutine {
     settings: CircleSettings,
     robot: RobotDescription,
     range: f64,
-    phase: CirclePhase,
-    started: f64,
     points: Vec<DVec2>,
     /// Readings beyond the border range: for steering only.
     far: Vec<DVec2>,
+    lap: Lap,
+}
+
+/// Where one circling stands: all of it starts over with [`CircleRoutine::restart`].
+#[derive(Debug, Clone)]
+struct Lap {
+    phase: CirclePhase,
+    started: f64,
     dropped: usize,
     last_sample: Option<u64>,
     command: (f64, f64),
@@ -195,6 +201,27 @@ pub struct CircleRoutine {
     side_hits: [(DVec2, f64); SIDE_HITS],
     side_hit_count: usize,
     side_hit_next: usize,
+}
+
+impl Lap {
+    fn new(now: f64) -> Self {
+        Self {
+            phase: CirclePhase::Turn { since: now },
+            started: now,
+            dropped: 0,
+            last_sample: None,
+            command: (0.0, 0.0),
+            last_theta: 0.0,
+            turned: 0.0,
+            lap_start: DVec2::ZERO,
+            closest: f64::INFINITY,
+            travel: 0.0,
+            last_pos: DVec2::ZERO,
+            side_hits: [(DVec2::ZERO, 0.0); SIDE_HITS],
+            side_hit_count: 0,
+            side_hit_next: 0,
+        }
+    }
 }
 
 /// How much farther than its closest (m) the robot must be from the lap's start for the
@@ -220,27 +247,22 @@ impl CircleRoutine {
             settings,
             robot: robot.clone(),
             range: robot.response.usable_range(settings.max_sigma),
-            phase: CirclePhase::Turn { since: now },
-            started: now,
             points: Vec::with_capacity(settings.capacity),
             far: Vec::with_capacity(settings.capacity),
-            dropped: 0,
-            last_sample: None,
-            command: (0.0, 0.0),
-            last_theta: 0.0,
-            turned: 0.0,
-            lap_start: DVec2::ZERO,
-            closest: f64::INFINITY,
-            travel: 0.0,
-            last_pos: DVec2::ZERO,
-            side_hits: [(DVec2::ZERO, 0.0); SIDE_HITS],
-            side_hit_count: 0,
-            side_hit_next: 0,
+            lap: Lap::new(now),
         }
     }
 
+    /// Starts over at time `now`, as [`CircleRoutine::new`] would, keeping the robot and
+    /// the point buffers: a planner that circles once a trial allocates nothing for it.
+    pub fn restart(&mut self, now: f64) {
+        self.points.clear();
+        self.far.clear();
+        self.lap = Lap::new(now);
+    }
+
     pub fn phase(&self) -> CirclePhase {
-        self.phase
+        self.lap.phase
     }
 
     pub fn settings(&self) -> &CircleSettings {
@@ -254,12 +276,12 @@ impl CircleRoutine {
 
     /// Points (border or steering) that did not fit in their buffers.
     pub fn dropped_points(&self) -> usize {
-        self.dropped
+        self.lap.dropped
     }
 
     /// Heading turned since the lap started, towards the object's side, rad.
     pub fn turned(&self) -> f64 {
-        self.turned
+        self.lap.turned
     }
 
     /// Largest distance (m) from a sensor at which a reading gives a border point.
@@ -288,25 +310,26 @@ impl CircleRoutine {
         odometry: Pose,
         ir_raw: &[f32; 8],
     ) -> (f64, f64) {
-        if let CirclePhase::Done { .. } = self.phase {
+        if let CirclePhase::Done { .. } = self.lap.phase {
             return (0.0, 0.0);
         }
-        if now - self.started > self.settings.timeout {
+        if now - self.lap.started > self.settings.timeout {
             return self.finish(CircleOutcome::Timeout, now);
         }
-        if self.last_sample == Some(ir_sample) {
-            return self.command;
+        if self.lap.last_sample == Some(ir_sample) {
+            return self.lap.command;
         }
-        let first = self.last_sample.is_none();
-        self.last_sample = Some(ir_sample);
-        if !first && let CirclePhase::Follow { .. } = self.phase {
-            self.turned += self.settings.side.sign() * wrap_angle(odometry.theta - self.last_theta);
+        let first = self.lap.last_sample.is_none();
+        self.lap.last_sample = Some(ir_sample);
+        if !first && let CirclePhase::Follow { .. } = self.lap.phase {
+            self.lap.turned +=
+                self.settings.side.sign() * wrap_angle(odometry.theta - self.lap.last_theta);
         }
-        self.last_theta = odometry.theta;
+        self.lap.last_theta = odometry.theta;
         if !first {
-            self.travel += (odometry.position() - self.last_pos).length();
+            self.lap.travel += (odometry.position() - self.lap.last_pos).length();
         }
-        self.last_pos = odometry.position();
+        self.lap.last_pos = odometry.position();
         self.collect(odometry, ir_raw);
         let face = self.face_direction(odometry, ir_raw);
 
@@ -314,7 +337,7 @@ impl CircleRoutine {
         let Some(nearest) = self.nearest(pos) else {
             // Nothing seen yet: look round in place for a turn, then give up.
             let search_time = TAU / self.settings.max_turn_rate;
-            if now - self.started > search_time {
+            if now - self.lap.started > search_time {
                 return self.finish(CircleOutcome::Lost, now);
             }
             return self.drive(
@@ -347,27 +370,28 @@ impl CircleRoutine {
         let error = wrap_angle(desired - odometry.theta);
         let omega = (s.heading_gain * error).clamp(-s.max_turn_rate, s.max_turn_rate);
 
-        match self.phase {
+        match self.lap.phase {
             CirclePhase::Turn { .. } => {
                 if error.abs() < s.start_heading_error {
-                    self.phase = CirclePhase::Follow { since: now };
-                    self.lap_start = pos;
-                    self.turned = 0.0;
-                    self.closest = f64::INFINITY;
+                    self.lap.phase = CirclePhase::Follow { since: now };
+                    self.lap.lap_start = pos;
+                    self.lap.turned = 0.0;
+                    self.lap.closest = f64::INFINITY;
                 } else {
                     return self.drive(0.0, omega);
                 }
             }
             CirclePhase::Follow { .. } => {
-                if self.turned >= TAU - s.close_heading {
+                if self.lap.turned >= TAU - s.close_heading {
                     // Close at the closest return to the lap's start: within `close_radius`
                     // once nearly a full turn is done, or wherever it is once the full
                     // turn is done (a start deep in an inner corner is off the path).
-                    let d = (pos - self.lap_start).length();
-                    self.closest = self.closest.min(d);
-                    let receding = d > self.closest + CLOSE_HYSTERESIS;
-                    let near = self.closest <= s.close_radius;
-                    if (receding && (near || self.turned >= TAU)) || self.turned >= TAU + FRAC_PI_2
+                    let d = (pos - self.lap.lap_start).length();
+                    self.lap.closest = self.lap.closest.min(d);
+                    let receding = d > self.lap.closest + CLOSE_HYSTERESIS;
+                    let near = self.lap.closest <= s.close_radius;
+                    if (receding && (near || self.lap.turned >= TAU))
+                        || self.lap.turned >= TAU + FRAC_PI_2
                     {
                         return self.finish(CircleOutcome::Closed, now);
                     }
@@ -399,9 +423,9 @@ impl CircleRoutine {
     }
 
     fn finish(&mut self, outcome: CircleOutcome, now: f64) -> (f64, f64) {
-        self.phase = CirclePhase::Done { outcome, at: now };
-        self.command = (0.0, 0.0);
-        self.command
+        self.lap.phase = CirclePhase::Done { outcome, at: now };
+        self.lap.command = (0.0, 0.0);
+        self.lap.command
     }
 
     /// Wheel speeds for body speed `v` and turn rate `omega`, both scaled down together
@@ -415,8 +439,8 @@ impl CircleRoutine {
             l *= k;
             r *= k;
         }
-        self.command = (l, r);
-        self.command
+        self.lap.command = (l, r);
+        self.lap.command
     }
 
     /// Readings within the border range become border points; farther ones (to the end
@@ -437,7 +461,7 @@ impl CircleRoutine {
             if buffer.len() < buffer.capacity() {
                 buffer.push(p);
             } else {
-                self.dropped += 1;
+                self.lap.dropped += 1;
             }
         }
     }
@@ -454,15 +478,15 @@ impl CircleRoutine {
             ir_raw[sensor] as f64,
             self.range,
         ) else {
-            self.side_hit_count = 0;
+            self.lap.side_hit_count = 0;
             return None;
         };
-        self.side_hits[self.side_hit_next] = (hit, self.travel);
-        self.side_hit_next = (self.side_hit_next + 1) % SIDE_HITS;
-        self.side_hit_count = (self.side_hit_count + 1).min(SIDE_HITS);
-        let old = (1..self.side_hit_count)
-            .map(|k| self.side_hits[(self.side_hit_next + SIDE_HITS - 1 - k) % SIDE_HITS])
-            .find(|&(_, t)| self.travel - t >= self.settings.trace_travel)?;
+        self.lap.side_hits[self.lap.side_hit_next] = (hit, self.lap.travel);
+        self.lap.side_hit_next = (self.lap.side_hit_next + 1) % SIDE_HITS;
+        self.lap.side_hit_count = (self.lap.side_hit_count + 1).min(SIDE_HITS);
+        let old = (1..self.lap.side_hit_count)
+            .map(|k| self.lap.side_hits[(self.lap.side_hit_next + SIDE_HITS - 1 - k) % SIDE_HITS])
+            .find(|&(_, t)| self.lap.travel - t >= self.settings.trace_travel)?;
         let trace = hit - old.0;
         let heading = DVec2::from_angle(odometry.theta);
         if trace.length() < self.settings.trace_min || trace.dot(heading) <= 0.0 {

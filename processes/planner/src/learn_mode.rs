@@ -305,7 +305,8 @@ fn take_estimates(
 struct Learner<'a> {
     driver: LockstepDriver,
     link: EstimatorLink,
-    robot: RobotDescription,
+    /// One routine for every circling, restarted each time: its buffers are allocated once.
+    circling: CircleRoutine,
     sense: ContactSense,
     settings: &'a LearnSettings,
     object0: Pose2,
@@ -418,10 +419,12 @@ impl Learner<'_> {
     /// lap closed.
     fn circle(&mut self) -> Result<(IrFrame, bool)> {
         let mut f = self.frame();
-        let mut routine = CircleRoutine::new(self.settings.circle, &self.robot, f.sim_time_s);
+        self.circling.restart(f.sim_time_s);
         loop {
-            let (l, r) = routine.update(f.sim_time_s, f.ir_sample, pose(f.odometry), &f.ir_raw);
-            if let CirclePhase::Done { outcome, .. } = routine.phase() {
+            let (l, r) =
+                self.circling
+                    .update(f.sim_time_s, f.ir_sample, pose(f.odometry), &f.ir_raw);
+            if let CirclePhase::Done { outcome, .. } = self.circling.phase() {
                 return Ok((f, outcome == CircleOutcome::Closed));
             }
             f = self.step(l, r)?;
@@ -541,7 +544,7 @@ pub fn run(
         link,
         sense: ContactSense::new(&robot),
         radius: scenario.object.shape.radius() + robot.body_radius + settings.start_margin_m,
-        robot,
+        circling: CircleRoutine::new(settings.circle, &robot, 0.0),
         settings,
         object0: Pose2::new(o.x, o.y, o.theta),
         total,
@@ -661,6 +664,8 @@ struct Progress {
     start: std::time::Instant,
     tty: bool,
     shown: u32,
+    /// The bar's text, rewritten in place for each redraw.
+    line: String,
 }
 
 impl Progress {
@@ -671,36 +676,46 @@ impl Progress {
             start: std::time::Instant::now(),
             tty: std::io::stdout().is_terminal(),
             shown: 0,
+            line: String::with_capacity(160),
         }
     }
 
-    fn line(&self, done: u32, learned: u32, rejected: u32) -> String {
+    /// Writes the bar into `self.line`, reusing its buffer.
+    fn render(&mut self, done: u32, learned: u32, rejected: u32) {
+        use std::fmt::Write;
         const WIDTH: u32 = 30;
-        let filled = (WIDTH * done / self.total) as usize;
+        let filled = WIDTH * done / self.total;
         let elapsed = self.start.elapsed().as_secs_f64();
         let left = if done > 0 {
             elapsed / f64::from(done) * f64::from(self.total - done.min(self.total))
         } else {
             f64::NAN
         };
-        format!(
-            "learning [{}{}] {done}/{} trials, {learned} learned, {rejected} rejected, {elapsed:.1} s, about {left:.0} s left",
-            "#".repeat(filled),
-            ".".repeat(WIDTH as usize - filled),
+        self.line.clear();
+        self.line.push_str("learning [");
+        self.line
+            .extend((0..WIDTH).map(|k| if k < filled { '#' } else { '.' }));
+        let _ = write!(
+            self.line,
+            "] {done}/{} trials, {learned} learned, {rejected} rejected, {elapsed:.1} s, about {left:.0} s left",
             self.total
-        )
+        );
     }
 
     fn show(&mut self, done: u32, learned: u32, rejected: u32) {
         use std::io::Write;
-        let line = self.line(done, learned, rejected);
-        if self.tty {
-            print!("\r{line}");
-            let _ = std::io::stdout().flush();
-        } else if done * 10 / self.total > self.shown * 10 / self.total || done == self.total {
-            println!("{line}");
-        }
+        let due = done * 10 / self.total > self.shown * 10 / self.total || done == self.total;
         self.shown = done;
+        if !self.tty && !due {
+            return;
+        }
+        self.render(done, learned, rejected);
+        if self.tty {
+            print!("\r{}", self.line);
+            let _ = std::io::stdout().flush();
+        } else {
+            println!("{}", self.line);
+        }
     }
 
     /// A line of its own above the bar.

@@ -385,3 +385,58 @@ fn circling_with_triple_ir_noise_and_fourfold_odometry_noise_still_never_touches
         "3x IR, 4x odometry noise",
     );
 }
+
+/// Runs `routine` (already started at the sim's time) to its end; its outcome and border
+/// points.
+fn run_lap(sim: &mut Sim, routine: &mut CircleRoutine) -> (Option<CircleOutcome>, Vec<DVec2>) {
+    let t0 = sim.sim_time();
+    while sim.sim_time() - t0 < 60.0 {
+        let s = *sim.sensors();
+        let (l, r) = routine.update(sim.sim_time(), s.ir_sample, s.odometry, &s.ir_raw);
+        if let CirclePhase::Done { outcome, .. } = routine.phase() {
+            return (Some(outcome), routine.border_points().to_vec());
+        }
+        sim.step(l, r);
+    }
+    (None, routine.border_points().to_vec())
+}
+
+#[test]
+fn a_restarted_routine_circles_exactly_as_a_new_one() {
+    let scenario = Scenario::builtin("triangle").expect("a built-in scenario");
+    let robot = RobotDescription::epuck();
+    let object = scenario.object.start;
+    let shape = &scenario.object.shape;
+    let sim = || Sim::new(&scenario, &robot, SimConfig::default()).expect("builds");
+    let settings = CircleSettings::default();
+
+    // A new routine's lap from 0 deg.
+    let mut a = sim();
+    a.reset(object, start_pose(shape, object, 0.0, robot.body_radius));
+    let mut new_routine = CircleRoutine::new(settings, &robot, a.sim_time());
+    let fresh = run_lap(&mut a, &mut new_routine);
+    assert_eq!(
+        fresh.0,
+        Some(CircleOutcome::Closed),
+        "the reference lap closes"
+    );
+
+    // A routine that has done a lap from 120 deg, restarted for the same lap as above in a
+    // world built the same way (same noise streams).
+    let mut b = sim();
+    b.reset(object, start_pose(shape, object, 120.0, robot.body_radius));
+    let mut routine = CircleRoutine::new(settings, &robot, b.sim_time());
+    let first = run_lap(&mut b, &mut routine);
+    assert!(first.0.is_some(), "the first lap ends");
+    let mut c = sim();
+    c.reset(object, start_pose(shape, object, 0.0, robot.body_radius));
+    routine.restart(c.sim_time());
+    let again = run_lap(&mut c, &mut routine);
+
+    assert_eq!(again.0, fresh.0, "the outcome");
+    assert_eq!(again.1.len(), fresh.1.len(), "the number of border points");
+    assert!(
+        again.1 == fresh.1,
+        "the border points differ from a new routine's"
+    );
+}

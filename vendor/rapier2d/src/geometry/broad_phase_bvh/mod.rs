@@ -46,6 +46,11 @@ pub struct BroadPhaseBvh {
     #[cfg(not(feature = "parallel"))]
     #[cfg_attr(feature = "serde-serialize", serde(skip))]
     candidates_workspace: Vec<(u32, u32)>,
+    /// Workspace buffer holding the new pairs found by one update (agp patch: they were
+    /// collected into a fresh `Vec` by every update that found one).
+    #[cfg(not(feature = "parallel"))]
+    #[cfg_attr(feature = "serde-serialize", serde(skip))]
+    new_pairs_workspace: Vec<(ColliderHandle, ColliderHandle)>,
     /// Workspace: per-collider "was updated this step" bit (collider arena index), so the
     /// stale-pair scan can visit a pair from one side only when both sides moved.
     #[cfg_attr(feature = "serde-serialize", serde(skip))]

@@ -97,7 +97,7 @@ impl NarrowPhase {
         // Begin/end-touch transitions detected during the update; applied by the
         // sorted post-loop pass (see `PairTransition`).
         #[cfg(not(feature = "parallel"))]
-        let mut transitions: Vec<PairTransition> = Vec::new();
+        let mut transitions: Vec<PairTransition> = core::mem::take(&mut self.pair_transitions);
         #[cfg(not(feature = "parallel"))]
         let process_pair = |edge: &mut crate::data::graph::Edge<ContactPair>, edge_id: u32| {
             pair_update::process_pair(
@@ -180,7 +180,11 @@ impl NarrowPhase {
         }
 
         #[cfg(not(feature = "parallel"))]
-        self.apply_pair_transitions(&mut transitions, islands, bodies, colliders, events);
+        {
+            self.apply_pair_transitions(&mut transitions, islands, bodies, colliders, events);
+            transitions.clear();
+            self.pair_transitions = transitions;
+        }
 
         #[cfg(feature = "parallel")]
         {

@@ -408,6 +408,12 @@ pub struct NarrowPhase {
     /// step) skip the buffer reallocation of freshly constructed pairs.
     #[cfg_attr(feature = "serde-serialize", serde(skip))]
     retired_pairs: Vec<ContactPair>,
+    /// Workspace: the begin/end-touch transitions of one contact update, kept between
+    /// updates so a contact that begins or ends allocates nothing (agp patch: it was a
+    /// `Vec` local to each update).
+    #[cfg(not(feature = "parallel"))]
+    #[cfg_attr(feature = "serde-serialize", serde(skip))]
+    pair_transitions: Vec<pair_update::PairTransition>,
 }
 
 pub(crate) type ContactManifoldIndex = usize;
@@ -451,6 +457,8 @@ impl NarrowPhase {
             force_list_valid: false,
             solver_color_todo: Vec::new(),
             soft_self: Default::default(),
+            #[cfg(not(feature = "parallel"))]
+            pair_transitions: Vec::new(),
         }
     }
 
