@@ -34,7 +34,7 @@ use glam::DVec2;
 use crate::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, Goal,
     PushChoiceSettings, PushPhase, PushPlanner, PushRoutine, PushSettings, RobotLocalizer,
-    TravelPhase, TravelRoutine, TravelSettings, World, WorldStepError, orbit_waypoints,
+    TravelPhase, TravelRoutine, TravelSettings, World, WorldStepError, orbit_waypoints_into,
     symmetric_angle_error,
 };
 
@@ -441,6 +441,8 @@ pub fn drive_episode<W: World>(
         localizer: RobotLocalizer::new(config.fix_gain),
         sense: ContactSense::new(robot),
         robot: robot.clone(),
+        circling: CircleRoutine::new(config.circle, robot, start_s),
+        waypoints: Vec::new(),
         config,
         world,
         samples: Vec::new(),
@@ -978,14 +980,15 @@ impl<W: World> Episode<'_, W> {
             self.trace(format_args!("approach saw nothing"));
             return Ok(None);
         }
-        let Some(points) = self.run.circle()? else {
+        if !self.run.circle()? {
             self.trace(format_args!("circling failed"));
             return Ok(None);
-        };
+        }
+        let points = self.run.circling.border_points();
         self.trace(format_args!("circled: {} points", points.len()));
         match &mut self.brain {
             Brain::Gradient { matcher, .. } => {
-                let pose = match_pose(matcher, &points, guess);
+                let pose = match_pose(matcher, points, guess);
                 self.trace(format_args!(
                     "estimate {:?} (guess {:?})",
                     pose.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
@@ -994,7 +997,7 @@ impl<W: World> Episode<'_, W> {
                 Ok(pose.map(Estimate::fresh))
             }
             Brain::Baseline { radius } => {
-                let Some(c) = border_centroid(&points) else {
+                let Some(c) = border_centroid(points) else {
                     return Ok(None);
                 };
                 let r = points.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
@@ -1028,6 +1031,10 @@ struct Run<'a, W: World> {
     sense: ContactSense,
     localizer: RobotLocalizer,
     config: &'a EpisodeConfig,
+    /// One routine for every circling, restarted each time: its buffers are allocated once.
+    circling: CircleRoutine,
+    /// The waypoints of the travel under way, a buffer kept from one travel to the next.
+    waypoints: Vec<DVec2>,
     samples: Vec<PoseSample>,
     recording: bool,
     /// Simulated time at the episode's start, s.
@@ -1115,20 +1122,21 @@ impl<W: World> Run<'_, W> {
         Ok(false)
     }
 
-    /// One circling; the border points (robot's frame) if the lap closed or gave enough.
-    fn circle(&mut self) -> Result<Option<Vec<DVec2>>, WorldStepError> {
-        let mut routine =
-            CircleRoutine::new(self.config.circle, &self.robot, self.world.sim_time());
+    /// One circling; whether the lap closed or gave enough border points (robot's frame,
+    /// `self.circling.border_points()`).
+    fn circle(&mut self) -> Result<bool, WorldStepError> {
+        self.circling.restart(self.world.sim_time());
         loop {
             let pose = self.pose();
             let s = self.world.senses();
-            let (l, r) = routine.update(self.world.sim_time(), s.ir_sample, pose, &s.ir_raw);
-            if let CirclePhase::Done { outcome, .. } = routine.phase() {
-                let points = routine.border_points();
-                let enough = points.len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
-                return Ok((outcome == CircleOutcome::Closed
-                    || (outcome == CircleOutcome::Timeout && enough))
-                    .then(|| points.to_vec()));
+            let (l, r) = self
+                .circling
+                .update(self.world.sim_time(), s.ir_sample, pose, &s.ir_raw);
+            if let CirclePhase::Done { outcome, .. } = self.circling.phase() {
+                let enough =
+                    self.circling.border_points().len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
+                return Ok(outcome == CircleOutcome::Closed
+                    || (outcome == CircleOutcome::Timeout && enough));
             }
             self.step(l, r)?;
         }
@@ -1148,7 +1156,9 @@ impl<W: World> Run<'_, W> {
     fn travel(&mut self, centre: DVec2, orbit: f64, start: Pose2) -> Result<bool, WorldStepError> {
         let pose = self.pose();
         let target = DVec2::new(start.x, start.y);
-        let way = orbit_waypoints(
+        let mut way = std::mem::take(&mut self.waypoints);
+        orbit_waypoints_into(
+            &mut way,
             pose.position(),
             centre,
             orbit,
@@ -1162,7 +1172,9 @@ impl<W: World> Run<'_, W> {
             way,
             start.theta,
         );
-        self.drive_travel(&mut travel, 30.0)
+        let arrived = self.drive_travel(&mut travel, 30.0);
+        self.waypoints = travel.into_waypoints();
+        arrived
     }
 
     fn drive_travel(

@@ -24,5 +24,7 @@ pub use episode::{
 pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use robot_localizer::RobotLocalizer;
-pub use travel::{TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints};
+pub use travel::{
+    TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, orbit_waypoints_into,
+};
 pub use world::{Senses, World, WorldStepError};

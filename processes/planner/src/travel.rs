@@ -50,6 +50,20 @@ pub fn orbit_waypoints(
     target: DVec2,
     arc_step: f64,
 ) -> Vec<DVec2> {
+    let mut out = Vec::new();
+    orbit_waypoints_into(&mut out, robot, centre, radius, target, arc_step);
+    out
+}
+
+/// [`orbit_waypoints`] into `out` (cleared first), reusing its allocation.
+pub fn orbit_waypoints_into(
+    out: &mut Vec<DVec2>,
+    robot: DVec2,
+    centre: DVec2,
+    radius: f64,
+    target: DVec2,
+    arc_step: f64,
+) {
     let from = robot - centre;
     let a0 = if from.length() > 1e-9 {
         from.to_angle()
@@ -59,7 +73,8 @@ pub fn orbit_waypoints(
     let a1 = (target - centre).to_angle();
     let turn = wrap_angle(a1 - a0);
     let n = (turn.abs() / arc_step.max(1e-3)).ceil() as usize;
-    let mut out = Vec::with_capacity(n + 2);
+    out.clear();
+    out.reserve(n + 2);
     if from.length() < radius - 1e-4 || from.length() > radius + 1e-4 {
         out.push(centre + radius * DVec2::from_angle(a0));
     }
@@ -67,7 +82,6 @@ pub fn orbit_waypoints(
         out.push(centre + radius * DVec2::from_angle(a0 + turn * k as f64 / n as f64));
     }
     out.push(target);
-    out
 }
 
 /// Where a travel stands.
@@ -114,6 +128,11 @@ impl TravelRoutine {
             heading,
             phase,
         }
+    }
+
+    /// The waypoint buffer back, for the next travel to reuse.
+    pub fn into_waypoints(self) -> Vec<DVec2> {
+        self.waypoints
     }
 
     pub fn phase(&self) -> TravelPhase {

@@ -152,6 +152,11 @@ fn serialize_joint_link_locs<S: serde::Serializer>(
 pub(crate) struct PersistentIslands {
     pub(crate) islands: VecMap<PersistentIsland>,
     free_islands: Vec<u32>,
+    /// Islands freed (merged away or emptied), cleared, their buffers kept for the next
+    /// [`Self::alloc_island`] (agp patch: a contact that split or merged islands allocated
+    /// the new island's buffers every time).
+    #[cfg_attr(feature = "serde-serialize", serde(skip))]
+    spare_islands: Vec<PersistentIsland>,
     /// `contact_link_locs[edge_id]` = (island id, index in `contact_links`); `INVALID_LOC` when
     /// the edge isn't linked (not touching). Mirrors the contact graph's edges vec: grown on
     /// link, swap-removed through [`Self::contact_edge_removed`].
@@ -223,18 +228,46 @@ impl PersistentIslands {
             .free_islands
             .pop()
             .unwrap_or_else(|| self.islands.len() as u32);
-        self.islands
-            .insert(id as usize, PersistentIsland::default());
+        let island = self.spare_islands.pop().unwrap_or_default();
+        self.islands.insert(id as usize, island);
         id
     }
 
     fn free_island(&mut self, id: u32) {
         let island = self.islands.remove(id as usize);
-        debug_assert!(island.is_some_and(|i| i.bodies.is_empty()));
+        debug_assert!(island.as_ref().is_some_and(|i| i.bodies.is_empty()));
+        if let Some(island) = island {
+            self.keep_spare(island);
+        }
         if self.split_island == Some(id) {
             self.split_island = None;
         }
         self.free_islands.push(id);
+    }
+
+    /// Keeps a freed island's buffers, emptied, for [`Self::alloc_island`]: it hands them
+    /// out as a `PersistentIsland::default()` that already has capacity.
+    fn keep_spare(&mut self, island: PersistentIsland) {
+        const MAX_SPARE_ISLANDS: usize = 64;
+        let PersistentIsland {
+            mut bodies,
+            mut contact_links,
+            mut joint_links,
+            ..
+        } = island;
+        if self.spare_islands.len() < MAX_SPARE_ISLANDS
+            && bodies.capacity() + contact_links.capacity() + joint_links.capacity() > 0
+        {
+            bodies.clear();
+            contact_links.clear();
+            joint_links.clear();
+            self.spare_islands.push(PersistentIsland {
+                bodies,
+                contact_links,
+                joint_links,
+                ..PersistentIsland::default()
+            });
+        }
     }
 
     /// Ensures `handle` (enabled, non-fixed) is an island member; creates a
@@ -487,6 +520,7 @@ impl PersistentIslands {
         big_island.constraint_remove_count += small_island.constraint_remove_count;
         big_island.sleeping &= small_island.sleeping;
         self.free_island(small);
+        self.keep_spare(small_island);
         big
     }
 
