@@ -59,6 +59,8 @@ static COUNTS: [AtomicU64; 3] = [AtomicU64::new(0), AtomicU64::new(0), AtomicU64
 thread_local! {
     /// The region this thread is in.
     static REGION: Cell<Region> = const { Cell::new(Region::Loop) };
+    /// Allocations this thread made while counting was on.
+    static THREAD_TOTAL: Cell<u64> = const { Cell::new(0) };
 }
 
 /// The counting allocator: forwards every call to the system allocator.
@@ -70,6 +72,7 @@ impl Counting {
         if ENABLED.load(Ordering::Relaxed) {
             let region = REGION.try_with(Cell::get).unwrap_or(Region::Loop);
             COUNTS[region as usize].fetch_add(1, Ordering::Relaxed);
+            let _ = THREAD_TOTAL.try_with(|n| n.set(n.get() + 1));
         }
     }
 }
@@ -105,8 +108,14 @@ unsafe impl GlobalAlloc for Counting {
 /// global allocator the counts stay 0 and [`report`] says nothing.
 pub fn enable_from_env() {
     if std::env::var(ENV).is_ok_and(|v| v == "1") {
-        ENABLED.store(true, Ordering::Relaxed);
+        enable();
     }
+}
+
+/// Turns counting on whatever the environment says: for the tests and benchmarks that
+/// measure allocations with [`thread_allocations`] or [`process_allocations`].
+pub fn enable() {
+    ENABLED.store(true, Ordering::Relaxed);
 }
 
 /// Whether counting is on.
@@ -116,6 +125,18 @@ pub fn enabled() -> bool {
 
 fn counts() -> [u64; 3] {
     [0, 1, 2].map(|i| COUNTS[i].load(Ordering::Relaxed))
+}
+
+/// Allocations this thread has made while counting was on: a test that runs beside others
+/// counts its own.
+pub fn thread_allocations() -> u64 {
+    THREAD_TOTAL.try_with(Cell::get).unwrap_or(0)
+}
+
+/// Allocations the whole process has made while counting was on, every thread's: a
+/// benchmark, or a test alone in its binary, also sees what helper threads allocate.
+pub fn process_allocations() -> u64 {
+    counts().iter().sum()
 }
 
 /// Books what this thread allocates to `region` until the guard is dropped.

@@ -2,46 +2,20 @@
 //! (approach, contact, push with tracking, circling) against the physics, counting the
 //! allocations made inside the session's per-frame calls only.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use agp_estimator::{IrView, LearningConfig, LearningSession};
 use agp_physics::{Sim, SimConfig};
 use agp_planner::{
     CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase, PushRoutine, PushSettings,
 };
+use agp_shared_types::alloc_count;
 use agp_world::{Pose, RobotDescription, Scenario};
 
-thread_local! {
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-struct Counting;
-
-fn count() {
-    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
+/// Allocations made by this thread: tests run in parallel, each counts its own.
 fn allocations() -> u64 {
-    ALLOCATIONS.with(|c| c.get())
+    alloc_count::thread_allocations()
 }
 
 fn view(sim: &Sim) -> IrView {
@@ -73,6 +47,7 @@ fn circle(sim: &mut Sim, robot: &RobotDescription, session: &mut LearningSession
 
 #[test]
 fn observing_frames_through_a_shape_circling_and_a_trial_allocates_nothing() {
+    alloc_count::enable();
     let scenario = Scenario::builtin("triangle").expect("built-in");
     let robot = RobotDescription::epuck();
     let mut sim = Sim::new(&scenario, &robot, SimConfig::default()).expect("builds");

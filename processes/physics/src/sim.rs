@@ -510,40 +510,14 @@ fn object_pieces(shape: &ObjectShape) -> Result<(Vec<SharedShape>, f64), SimBuil
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::alloc::{GlobalAlloc, Layout, System};
-    use std::cell::Cell;
-
-    thread_local! {
-        /// Allocations made by this thread: tests run in parallel, each counts its own.
-        static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-    }
-
-    struct Counting;
-
-    fn count() {
-        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-    }
-
-    // SAFETY: every call is forwarded unchanged to the system allocator.
-    unsafe impl GlobalAlloc for Counting {
-        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-            count();
-            unsafe { System.alloc(layout) }
-        }
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-            unsafe { System.dealloc(ptr, layout) }
-        }
-        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-            count();
-            unsafe { System.realloc(ptr, layout, new_size) }
-        }
-    }
+    use agp_shared_types::alloc_count;
 
     #[global_allocator]
-    static GLOBAL: Counting = Counting;
+    static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
+    /// Allocations made by this thread: tests run in parallel, each counts its own.
     fn allocations() -> u64 {
-        ALLOCATIONS.with(|c| c.get())
+        alloc_count::thread_allocations()
     }
 
     /// Which collider pairs rapier's narrow phase holds and which of them touch: a step
@@ -562,6 +536,7 @@ mod tests {
 
     #[test]
     fn a_repeated_push_allocates_nothing() {
+        alloc_count::enable();
         for name in agp_world::BUILTIN_NAMES {
             let scenario = Scenario::builtin(name).expect("built-in");
             let mut sim = Sim::new(&scenario, &RobotDescription::epuck(), SimConfig::default())

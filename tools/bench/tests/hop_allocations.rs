@@ -2,54 +2,18 @@
 //!
 //! Both sides run in this process (pong on a thread of its own), under an instance name of
 //! this test's own, which leaves no file behind. Only allocations made by the ping thread
-//! while the flag is up are counted.
+//! during the measured run are counted.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::time::Duration;
 
 use agp_bench::hop::{
     HopPorts, HopSmall, Side, Strategy, WaitConfig, new_histogram, ping_loop, pong_loop,
     service_stem,
 };
-use agp_shared_types::Instance;
-
-struct Counting;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-/// Counts one allocation if this thread counts.
-fn count() {
-    if COUNTING.try_with(Cell::get).unwrap_or(false) {
-        let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-    }
-}
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as ours.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as ours.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as ours.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use agp_shared_types::{Instance, alloc_count};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 /// Runs two ping-pong runs of `strategy` against a pong thread and returns how many heap
 /// allocations the ping thread made during the second one.
@@ -78,13 +42,13 @@ fn allocations_of_a_warm_run(instance: &Instance, strategy: Strategy) -> u64 {
 
     let mut histogram = new_histogram();
     ping_loop(&ping, &config, 100, 1_000, &mut histogram, &mut || Ok(())).expect("warm-up run");
-    ALLOCATIONS.with(|n| n.set(0));
-    COUNTING.with(|c| c.set(true));
+    alloc_count::enable();
+    let before = alloc_count::thread_allocations();
     let result = ping_loop(&ping, &config, 0, 1_000, &mut histogram, &mut || Ok(()));
-    COUNTING.with(|c| c.set(false));
+    let made = alloc_count::thread_allocations() - before;
     result.expect("measured run");
     pong.join().expect("pong thread");
-    ALLOCATIONS.with(Cell::get)
+    made
 }
 
 /// Removes the instance's files when dropped, also when a test fails half-way.

@@ -2,44 +2,24 @@
 //! orientation match and the push search. One test in this binary, so that no other test
 //! thread allocates while it counts.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
-
 use agp_affordance::{GaussianSmoother, MatchMethod, ShapeMatcher, ShapeMatcherConfig};
 use agp_bench::math::{
     circling_points, learn_from_sim, perimeter, polygon_of, random_goals, random_grid,
     start_radius_m,
 };
 use agp_planner::{PushChoiceSettings, PushPlanner};
-use agp_shared_types::Pose2;
+use agp_shared_types::{Pose2, alloc_count};
 use agp_world::{Rng, RobotDescription, Scenario};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: every call is forwarded unchanged to the system allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
+/// Allocations `f` makes, on any thread of the process.
 fn allocations_of(mut f: impl FnMut()) -> u64 {
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    alloc_count::enable();
+    let before = alloc_count::process_allocations();
     f();
-    ALLOCATIONS.load(Ordering::Relaxed) - before
+    alloc_count::process_allocations() - before
 }
 
 #[test]

@@ -8,10 +8,8 @@
 //! cargo run --release -p agp-bench --bin bench-math -- --json math.json
 //! ```
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use agp_affordance::{GaussianSmoother, MatchMethod, ShapeMatcher, ShapeMatcherConfig};
@@ -21,37 +19,18 @@ use agp_bench::math::{
     reference_plan_over, reference_smooth, smoothing_disagreement, start_radius_m,
 };
 use agp_planner::{PushChoiceSettings, PushPlanner};
-use agp_shared_types::Pose2;
+use agp_shared_types::{Pose2, alloc_count};
 use agp_world::{Rng, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde_json::json;
 
 /// Counts allocations, to show that our hot paths make none.
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: every call is forwarded unchanged to the system allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 fn allocations() -> u64 {
-    ALLOCATIONS.load(Ordering::Relaxed)
+    alloc_count::process_allocations()
 }
 
 /// Times the math of the pipeline beside straightforward references.
@@ -98,6 +77,7 @@ struct Row {
 }
 
 fn main() -> Result<()> {
+    alloc_count::enable();
     let args = Args::parse();
     if args.calls == 0 || args.ref_calls == 0 {
         bail!("--calls and --ref-calls must be at least 1");

@@ -1,40 +1,20 @@
 //! Physics steps per second: the robot pushing each built-in object (IR sampled at 64 Hz,
 //! odometry, overhead fix: the whole step), and with no object in reach.
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use agp_physics::{Sim, SimConfig};
+use agp_shared_types::alloc_count;
 use agp_world::{BUILTIN_NAMES, Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 
-/// Counts allocations, to report how many a step makes in a release build (rapier's own:
-/// the simulator's part makes none, as its tests check).
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: every call is forwarded unchanged to the system allocator.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
+/// Counts allocations, to report how many a step makes in a release build (none: the
+/// simulator preallocates and rapier is patched, see vendor/rapier2d/PATCHES.md).
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 /// Measures physics steps per second for each built-in object while the robot pushes it.
 #[derive(Debug, Parser)]
@@ -84,7 +64,7 @@ fn run(scenario: &Scenario, config: SimConfig, seconds: f64, in_reach: bool) -> 
     };
     let mut episode = 0u64;
     let start = Instant::now();
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed);
+    let allocations = alloc_count::process_allocations();
     while f.steps == 0 || start.elapsed().as_secs_f64() < seconds {
         let offset = 0.01 * ((episode % 5) as f64 - 2.0);
         let object = if in_reach {
@@ -103,11 +83,12 @@ fn run(scenario: &Scenario, config: SimConfig, seconds: f64, in_reach: bool) -> 
         episode += 1;
     }
     f.wall_s = start.elapsed().as_secs_f64();
-    f.allocations = ALLOCATIONS.load(Ordering::Relaxed) - allocations;
+    f.allocations = alloc_count::process_allocations() - allocations;
     Ok(f)
 }
 
 fn main() {
+    alloc_count::enable();
     if let Err(e) = run_all() {
         eprintln!("bench-physics: error: {e:#}");
         std::process::exit(1);
