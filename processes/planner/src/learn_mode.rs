@@ -231,9 +231,9 @@ impl EstimatorLink {
         Ok(())
     }
 
-    /// Takes the reports that arrived; returns the first of `wanted` kind among them.
+    /// Takes the reports that arrived; returns the first of `wanted` kind among them. Called
+    /// by [`Self::wait_report`] alone, whose region it shares.
     fn drain_reports(&mut self, wanted: Option<LearnReportKind>) -> Option<LearnReport> {
-        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let mut found = None;
         while let Ok(Some(r)) = self.reports.receive() {
             let kind = LearnReportKind::from_u32(r.kind);
