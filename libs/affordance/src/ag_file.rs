@@ -1,9 +1,10 @@
-use std::io::Write;
+use std::io::{Read, Write};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use agp_shared_types::{GRID_CELLS, GRID_SIDE, MAX_GRID_ALPHAS};
 
-use crate::affordance_gradient::{AlphaLayer, LAYER_GRIDS};
+use crate::affordance_gradient::{ALPHA_EPS_DEG, AlphaLayer, LAYER_GRIDS, LayerGrid};
 use crate::{AffordanceGradient, Grid};
 
 /// First bytes of every AG file.
@@ -14,7 +15,32 @@ pub const AG_FILE_VERSION: u32 = 1;
 /// ([`MAX_GRID_ALPHAS`]), so a loaded gradient can always be published whole.
 pub const MAX_ALPHAS: u32 = 8;
 /// Longest object name a file may hold, bytes.
-pub const MAX_NAME_LEN: u32 = 4096;
+pub const MAX_NAME_LEN: u32 = 256;
+/// Largest |alpha| a file may hold, degrees: a push deviated by more than a right angle from
+/// the centroid moves away from the object.
+pub const MAX_ALPHA_DEG: f64 = 90.0;
+/// Smallest and largest grid cell a file may hold, metres (0.1 mm to 10 mm: a 128-cell grid
+/// then spans 12.8 mm to 1.28 m).
+pub const CELL_SIZE_M: (f64, f64) = (1e-4, 1e-2);
+/// Largest |value| of a grid cell (sums of unit-peak Gaussians and of their weighted SI
+/// values): far above what any learning writes, far below what overflows an `f32` sum.
+pub const MAX_CELL_MAGNITUDE: f32 = 1e12;
+/// Largest rotation of a single push a file may hold, radians (a full turn).
+pub const MAX_PUSH_ROTATION_RAD: f64 = std::f64::consts::TAU;
+/// Most pushes and border points one alpha's layer may count.
+pub const MAX_LAYER_COUNT: u64 = 1_000_000_000_000;
+/// Largest AG file: one of [`MAX_ALPHAS`] alphas and a name of [`MAX_NAME_LEN`] bytes.
+/// Nothing longer is read.
+pub const MAX_AG_FILE_BYTES: u64 = (6
+    + 4
+    + 4
+    + 8
+    + 4
+    + 8 * MAX_ALPHAS as usize
+    + 4
+    + MAX_NAME_LEN as usize
+    + MAX_ALPHAS as usize * (LAYER_GRIDS * GRID_BYTES + LAYER_TAIL_BYTES)
+    + 8) as u64;
 
 const _: () = assert!(
     MAX_ALPHAS as usize <= MAX_GRID_ALPHAS,
@@ -47,6 +73,33 @@ pub enum AgFileLoadError {
         path: PathBuf,
         /// The cause.
         source: std::io::Error,
+    },
+    /// The path leads (after following links) to something that is not a regular file: a
+    /// FIFO, a device, a directory. Refused without reading from it.
+    #[error("AG file `{}` is not a regular file but {kind}", path.display())]
+    NotRegularFile {
+        /// The file.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+    },
+    /// The file is longer than any AG file can be.
+    #[error("AG file `{}` is larger than the limit of {limit} bytes (MAX_AG_FILE_BYTES)", path.display())]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// [`MAX_AG_FILE_BYTES`].
+        limit: u64,
+    },
+    /// The gradient was learned on another object than the one asked for.
+    #[error("AG file `{}` holds the gradient of object `{found}`, not of `{expected}`", path.display())]
+    WrongObject {
+        /// The file.
+        path: PathBuf,
+        /// The object asked for (the scenario's name).
+        expected: String,
+        /// The object named in the file.
+        found: String,
     },
     /// The file does not start with [`AG_FILE_MAGIC`].
     #[error("`{}` is not an AG file (bad magic bytes)", path.display())]
@@ -164,13 +217,36 @@ impl AffordanceGradient {
     /// Reads a gradient written by [`AffordanceGradient::save`], refusing a file with bad
     /// magic, another version or grid size, a truncated or corrupt (checksum) file, or
     /// impossible values.
+    ///
+    /// Reads nothing but a regular file (a FIFO or a link to a device is refused without
+    /// blocking) of at most [`MAX_AG_FILE_BYTES`], and holds every number to a limit:
+    /// |alpha| <= [`MAX_ALPHA_DEG`], distinct; a cell size within [`CELL_SIZE_M`]; cells
+    /// finite, within [`MAX_CELL_MAGNITUDE`] and of their statistic's sign; a push's
+    /// rotation at most [`MAX_PUSH_ROTATION_RAD`]; counts at most [`MAX_LAYER_COUNT`]; a
+    /// name of at most [`MAX_NAME_LEN`] bytes of UTF-8 without control characters. Each
+    /// refusal names the file, the field and the limit.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, AgFileLoadError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| AgFileLoadError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let bytes = read_bounded(path)?;
         Self::from_bytes(&bytes, path)
+    }
+
+    /// [`AffordanceGradient::load`], refusing a gradient learned on another object than
+    /// `expected_object` (the scenario's name) with [`AgFileLoadError::WrongObject`].
+    pub fn load_for(
+        path: impl AsRef<Path>,
+        expected_object: &str,
+    ) -> Result<Self, AgFileLoadError> {
+        let path = path.as_ref();
+        let ag = Self::load(path)?;
+        if ag.object_name != expected_object {
+            return Err(AgFileLoadError::WrongObject {
+                path: path.to_owned(),
+                expected: expected_object.to_owned(),
+                found: ag.object_name,
+            });
+        }
+        Ok(ag)
     }
 
     fn to_bytes(&self) -> Vec<u8> {
@@ -258,7 +334,7 @@ impl AffordanceGradient {
         let name_len = r.u32()?;
         if name_len > MAX_NAME_LEN {
             return Err(invalid(format!(
-                "object name of {name_len} bytes, at most {MAX_NAME_LEN} allowed"
+                "object name: {name_len} bytes, at most {MAX_NAME_LEN} (MAX_NAME_LEN) allowed"
             )));
         }
         let name_bytes = r.take(name_len as usize)?;
@@ -288,13 +364,29 @@ impl AffordanceGradient {
         let object_name = std::str::from_utf8(name_bytes)
             .map_err(|_| invalid("object name is not UTF-8".into()))?
             .to_owned();
-        if !(cell_size_m.is_finite() && cell_size_m > 0.0) {
-            return Err(invalid(format!("cell size {cell_size_m} m")));
+        if object_name.chars().any(char::is_control) {
+            return Err(invalid("object name holds a control character".into()));
+        }
+        let (lo, hi) = CELL_SIZE_M;
+        if !(cell_size_m.is_finite() && (lo..=hi).contains(&cell_size_m)) {
+            return Err(invalid(format!(
+                "cell size {cell_size_m} m, expected {lo} to {hi} m (CELL_SIZE_M)"
+            )));
         }
         for (k, &alpha) in alphas.iter().enumerate() {
-            if !alpha.is_finite() || alphas[..k].contains(&alpha) {
+            if !(alpha.is_finite() && alpha.abs() <= MAX_ALPHA_DEG) {
                 return Err(invalid(format!(
-                    "alpha {alpha} deg is not finite or repeated"
+                    "alpha {} is {alpha} deg, beyond the limit |alpha| <= {MAX_ALPHA_DEG} deg (MAX_ALPHA_DEG)",
+                    k + 1
+                )));
+            }
+            if alphas[..k]
+                .iter()
+                .any(|&b| (alpha - b).abs() < ALPHA_EPS_DEG)
+            {
+                return Err(invalid(format!(
+                    "alpha {} is {alpha} deg, repeated: alphas must be distinct",
+                    k + 1
                 )));
             }
         }
@@ -303,11 +395,13 @@ impl AffordanceGradient {
             .map(|&alpha| AlphaLayer::new(alpha, cell_size_m))
             .collect();
         for layer in &mut layers {
-            for grid in &mut layer.grids {
+            for (g, grid) in layer.grids.iter_mut().enumerate() {
                 read_grid(&mut r, grid)?;
-                if grid.cells().iter().any(|c| !c.is_finite()) {
+                if let Some(why) = check_cells(g, grid.cells()) {
                     return Err(invalid(format!(
-                        "a grid of alpha {} deg holds a non-finite value",
+                        "grid {} ({}) of alpha {} deg: {why}",
+                        g + 1,
+                        GRID_NAMES[g],
                         layer.alpha_deg
                     )));
                 }
@@ -317,11 +411,24 @@ impl AffordanceGradient {
             layer.max_rotation_rad = r.f64()?;
             layer.pushes = r.u64()?;
             layer.border_points = r.u64()?;
-            if !(layer.max_rotation_rad.is_finite() && layer.max_rotation_rad >= 0.0) {
+            if !(layer.max_rotation_rad.is_finite()
+                && (0.0..=MAX_PUSH_ROTATION_RAD).contains(&layer.max_rotation_rad))
+            {
                 return Err(invalid(format!(
-                    "max rotation {} rad of alpha {} deg",
+                    "max rotation {} rad of alpha {} deg, expected 0 to {MAX_PUSH_ROTATION_RAD} rad (MAX_PUSH_ROTATION_RAD)",
                     layer.max_rotation_rad, layer.alpha_deg
                 )));
+            }
+            for (field, count) in [
+                ("pushes", layer.pushes),
+                ("border points", layer.border_points),
+            ] {
+                if count > MAX_LAYER_COUNT {
+                    return Err(invalid(format!(
+                        "{count} {field} at alpha {} deg, at most {MAX_LAYER_COUNT} (MAX_LAYER_COUNT)",
+                        layer.alpha_deg
+                    )));
+                }
             }
         }
         layers.sort_by(|a, b| a.alpha_deg.total_cmp(&b.alpha_deg));
@@ -331,6 +438,97 @@ impl AffordanceGradient {
             layers,
         })
     }
+}
+
+/// The grids of a layer, in file order, as the errors name them.
+const GRID_NAMES: [&str; LAYER_GRIDS] = [
+    "S evidence",
+    "push weight",
+    "displacement x sum",
+    "displacement y sum",
+    "squared displacement sum",
+    "rotation sum",
+    "squared rotation sum",
+    "R+ sum",
+    "R+ weight",
+    "R- sum",
+    "R- weight",
+];
+
+/// Why the cells of layer grid `g` are impossible, if they are: not finite, beyond
+/// [`MAX_CELL_MAGNITUDE`], or of the wrong sign for a sum of Gaussians (weights, S, squares
+/// and R+ are never negative, R- never positive).
+fn check_cells(g: usize, cells: &[f32]) -> Option<String> {
+    let sign = match g {
+        x if x == LayerGrid::DisplacementX as usize
+            || x == LayerGrid::DisplacementY as usize
+            || x == LayerGrid::Rotation as usize =>
+        {
+            0
+        }
+        x if x == LayerGrid::RotationNeg as usize => -1,
+        _ => 1,
+    };
+    let (k, &c) = cells.iter().enumerate().find(|&(_, &c)| {
+        !(c.is_finite() && c.abs() <= MAX_CELL_MAGNITUDE)
+            || (sign > 0 && c < 0.0)
+            || (sign < 0 && c > 0.0)
+    })?;
+    Some(if !c.is_finite() {
+        format!("cell {k} holds a non-finite value")
+    } else if c.abs() > MAX_CELL_MAGNITUDE {
+        format!("cell {k} is {c}, beyond the limit of {MAX_CELL_MAGNITUDE} (MAX_CELL_MAGNITUDE)")
+    } else if sign > 0 {
+        format!("cell {k} is {c}, expected a non-negative value")
+    } else {
+        format!("cell {k} is {c}, expected a non-positive value")
+    })
+}
+
+/// Reads at most [`MAX_AG_FILE_BYTES`] of the regular file `path`, without blocking on a
+/// FIFO (opened with `O_NONBLOCK`, its type checked on the open descriptor).
+fn read_bounded(path: &Path) -> Result<Vec<u8>, AgFileLoadError> {
+    use std::os::unix::fs::FileTypeExt;
+    let io = |source| AgFileLoadError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(io)?;
+    let kind = file.metadata().map_err(io)?.file_type();
+    if !kind.is_file() {
+        let kind = if kind.is_dir() {
+            "a directory"
+        } else if kind.is_fifo() {
+            "a FIFO"
+        } else if kind.is_char_device() {
+            "a character device"
+        } else if kind.is_block_device() {
+            "a block device"
+        } else if kind.is_socket() {
+            "a socket"
+        } else {
+            "a special file"
+        };
+        return Err(AgFileLoadError::NotRegularFile {
+            path: path.to_owned(),
+            kind,
+        });
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_AG_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_AG_FILE_BYTES {
+        return Err(AgFileLoadError::TooLarge {
+            path: path.to_owned(),
+            limit: MAX_AG_FILE_BYTES,
+        });
+    }
+    Ok(bytes)
 }
 
 fn read_grid(r: &mut Reader<'_>, grid: &mut Grid) -> Result<(), AgFileLoadError> {

@@ -20,7 +20,9 @@ pub use affordance_learner::{
     AffordanceLearner, LearnerBuildError, LearnerConfig, PushOutcome, SampleAddError,
 };
 pub use ag_file::{
-    AG_FILE_MAGIC, AG_FILE_VERSION, AgFileLoadError, AgFileSaveError, MAX_ALPHAS, MAX_NAME_LEN,
+    AG_FILE_MAGIC, AG_FILE_VERSION, AgFileLoadError, AgFileSaveError, CELL_SIZE_M,
+    MAX_AG_FILE_BYTES, MAX_ALPHA_DEG, MAX_ALPHAS, MAX_CELL_MAGNITUDE, MAX_LAYER_COUNT,
+    MAX_NAME_LEN, MAX_PUSH_ROTATION_RAD,
 };
 pub use gaussian_smoother::{GaussianSmoother, SmoothingMethod};
 pub use grid::{DEFAULT_CELL_SIZE_M, Grid, GridPayloadReadError};

@@ -1,11 +1,15 @@
 //! The world both physics and estimator know: the robot's description, scenarios and polygon geometry.
 
+mod bounded_read;
 mod geometry;
 mod ir_geometry;
 mod rng;
 mod robot;
 mod scenario;
 
+pub use bounded_read::{
+    BoundedReadError, MAX_CONFIG_FILE_BYTES, read_regular_file, read_regular_text,
+};
 pub use geometry::{
     Polygon, PolygonError, point_segment_distance, ray_segment, segments_intersect, signed_area,
 };
@@ -15,13 +19,19 @@ pub use ir_geometry::{
 pub use rng::Rng;
 pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
 pub use scenario::{
-    BUILTIN_NAMES, Localization, ObjectShape, ObjectSpec, Pose, RobotSetup, Scenario,
-    ScenarioLoadError, TaskKind, TaskSpec,
+    ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Localization, MAX_POLYGON_VERTICES, MAX_POSE_ANGLE_DEG,
+    MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape, ObjectSpec, Pose,
+    RobotSetup, Scenario, ScenarioLoadError, TaskKind, TaskSpec,
 };
 
 /// 1-based line number of byte offset `offset` in `text`.
 pub(crate) fn line_of(text: &str, offset: usize) -> usize {
-    text[..offset.min(text.len())].matches('\n').count() + 1
+    // Bytes, not a str slice: an offset inside a character must not panic.
+    text.as_bytes()[..offset.min(text.len())]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
 }
 
 /// Angle wrapped into (-pi, pi].

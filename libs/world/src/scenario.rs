@@ -4,8 +4,26 @@ use glam::DVec2;
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::bounded_read::{BoundedReadError, MAX_CONFIG_FILE_BYTES, read_regular_text};
 use crate::geometry::{Polygon, PolygonError};
-use crate::line_of;
+use crate::{RobotDescription, line_of};
+
+/// Longest scenario `name`, characters. The name is a plain name (letters, digits, `-`,
+/// `_`): it names the AG file in the results folder (`<name>.ag`), so it can never be a path.
+pub const MAX_SCENARIO_NAME_LEN: usize = 64;
+/// Most vertices a polygon may have: the convex decomposition and the physics's colliders
+/// are built for objects of a few corners, not for a traced outline.
+pub const MAX_POLYGON_VERTICES: usize = 64;
+/// Half the side of the arena, mm: every coordinate of a scenario (vertices, starts, goal,
+/// path) lies within +-this.
+pub const ARENA_HALF_SIZE_MM: f64 = 5000.0;
+/// Smallest and largest object: the distance from its centroid to its farthest border
+/// point, mm.
+pub const OBJECT_RADIUS_MM: (f64, f64) = (5.0, 1000.0);
+/// Smallest object area, mm^2.
+pub const MIN_OBJECT_AREA_MM2: f64 = 10.0;
+/// Largest |angle| of a pose, degrees.
+pub const MAX_POSE_ANGLE_DEG: f64 = 360.0;
 
 /// A pose in the plane, SI units: metres and radians (counter-clockwise, 0 = +x).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -160,10 +178,11 @@ pub struct Scenario {
 /// errors name the line.
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioLoadError {
-    #[error("cannot read scenario `{path}`: {source}")]
+    #[error("cannot read scenario `{path}`: {reason}")]
     Read {
         path: String,
-        source: std::io::Error,
+        /// Why (shown in the message, so not a `source` that would show it twice).
+        reason: BoundedReadError,
     },
     #[error("{path}:{line}: {message}")]
     Invalid {
@@ -295,11 +314,15 @@ impl Scenario {
         Err(ScenarioLoadError::Unknown(name_or_file.to_owned()))
     }
 
-    /// Loads and validates a scenario file whole.
+    /// Loads and validates a scenario file whole. Refuses without blocking anything that is
+    /// not a regular file (a FIFO, a link to `/dev/zero`) and any file larger than
+    /// [`MAX_CONFIG_FILE_BYTES`].
     pub fn load(path: &Path) -> Result<Scenario, ScenarioLoadError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioLoadError::Read {
-            path: path.display().to_string(),
-            source,
+        let text = read_regular_text(path, MAX_CONFIG_FILE_BYTES).map_err(|reason| {
+            ScenarioLoadError::Read {
+                path: path.display().to_string(),
+                reason,
+            }
         })?;
         let mut s = Self::parse(&text, &path.display().to_string())?;
         s.source = path.display().to_string();
@@ -320,9 +343,9 @@ impl Scenario {
             )
         })?;
 
-        let name = file.name.get_ref().trim().to_owned();
-        if name.is_empty() {
-            return Err(err(file.name.span(), "`name` is empty".into()));
+        let name = file.name.get_ref().clone();
+        if let Some(why) = bad_name(&name) {
+            return Err(err(file.name.span(), why));
         }
 
         let o = &file.object;
@@ -334,19 +357,52 @@ impl Scenario {
                 if o.radius_mm.is_some() {
                     return Err(err(o.shape.span(), "a polygon takes no `radius_mm`".into()));
                 }
+                let refuse = |msg: String| err(vs.span(), format!("`vertices_mm`: {msg}"));
+                let count = vs.get_ref().len();
+                if count > MAX_POLYGON_VERTICES {
+                    return Err(refuse(format!(
+                        "{count} vertices, at most {MAX_POLYGON_VERTICES} allowed"
+                    )));
+                }
+                for (i, v) in vs.get_ref().iter().enumerate() {
+                    if !(v[0].is_finite() && v[1].is_finite()) {
+                        return Err(refuse(format!("vertex {} is not a finite number", i + 1)));
+                    }
+                    if v[0].abs() > ARENA_HALF_SIZE_MM || v[1].abs() > ARENA_HALF_SIZE_MM {
+                        return Err(refuse(format!(
+                            "vertex {} ({}, {}) mm lies beyond the arena's +-{ARENA_HALF_SIZE_MM} mm",
+                            i + 1,
+                            v[0],
+                            v[1]
+                        )));
+                    }
+                }
                 let points = vs
                     .get_ref()
                     .iter()
                     .map(|p| DVec2::new(p[0], p[1]) * 1e-3)
                     .collect();
                 let poly = Polygon::new(points).map_err(|e| {
-                    let msg = match e {
+                    refuse(match e {
                         PolygonError::NotFinite(i) => format!("vertex {i} is not a finite number"),
                         other => other.to_string(),
-                    };
-                    err(vs.span(), format!("`vertices_mm`: {msg}"))
+                    })
                 })?;
-                ObjectShape::Polygon(poly.centred())
+                let poly = poly.centred();
+                let radius_mm = poly.radius() * 1e3;
+                let (lo, hi) = OBJECT_RADIUS_MM;
+                if !(lo..=hi).contains(&radius_mm) {
+                    return Err(refuse(format!(
+                        "the object reaches {radius_mm:.1} mm from its centroid; it must reach from {lo} to {hi} mm"
+                    )));
+                }
+                let area_mm2 = poly.area() * 1e6;
+                if area_mm2 < MIN_OBJECT_AREA_MM2 {
+                    return Err(refuse(format!(
+                        "the object's area is {area_mm2:.3} mm^2, at least {MIN_OBJECT_AREA_MM2} mm^2 needed"
+                    )));
+                }
+                ObjectShape::Polygon(poly)
             }
             "circle" => {
                 let Some(r) = &o.radius_mm else {
@@ -358,7 +414,8 @@ impl Scenario {
                         "a circle takes no `vertices_mm`".into(),
                     ));
                 }
-                positive(r, "radius_mm", &err)?;
+                let (lo, hi) = OBJECT_RADIUS_MM;
+                positive_within(r, "radius_mm", lo, hi, "mm", &err)?;
                 ObjectShape::Circle {
                     radius: *r.get_ref() * 1e-3,
                 }
@@ -370,9 +427,15 @@ impl Scenario {
                 ));
             }
         };
-        positive(&o.mass_kg, "mass_kg", &err)?;
-        non_negative(&o.floor_friction, "floor_friction", &err)?;
-        non_negative(&o.contact_friction, "contact_friction", &err)?;
+        positive_within(&o.mass_kg, "mass_kg", MASS_KG.0, MASS_KG.1, "kg", &err)?;
+        non_negative_within(&o.floor_friction, "floor_friction", MAX_FRICTION, "", &err)?;
+        non_negative_within(
+            &o.contact_friction,
+            "contact_friction",
+            MAX_FRICTION,
+            "",
+            &err,
+        )?;
         let object = ObjectSpec {
             shape,
             mass: *o.mass_kg.get_ref(),
@@ -397,7 +460,9 @@ impl Scenario {
                     None => DEFAULT_ROBOT_START,
                 },
                 odometry_noise: match &r.odometry_noise {
-                    Some(v) => *non_negative(v, "odometry_noise", &err)?,
+                    Some(v) => {
+                        *non_negative_within(v, "odometry_noise", MAX_ODOMETRY_NOISE, "", &err)?
+                    }
                     None => DEFAULT_ODOMETRY_NOISE,
                 },
                 localization: match &r.localization {
@@ -405,7 +470,9 @@ impl Scenario {
                     Some(v) => localization(v, &err)?,
                 },
                 ir_noise_scale: match &r.ir_noise_scale {
-                    Some(v) => *non_negative(v, "ir_noise_scale", &err)?,
+                    Some(v) => {
+                        *non_negative_within(v, "ir_noise_scale", MAX_IR_NOISE_SCALE, "", &err)?
+                    }
                     None => 1.0,
                 },
             },
@@ -424,6 +491,20 @@ impl Scenario {
             Some(t) => task(t, &err)?,
         };
 
+        let clearance_mm = start_clearance_mm(&object, &robot);
+        if clearance_mm < 0.0 {
+            let at = match (file.robot.as_ref().and_then(|r| r.start.as_ref()), &o.start) {
+                (Some(p), _) | (None, Some(p)) => p.span(),
+                (None, None) => o.shape.span(),
+            };
+            return Err(err(
+                at,
+                format!(
+                    "the robot starts overlapping the object: clearance {clearance_mm:.1} mm between the robot's body and the object's border, at least 0 mm needed"
+                ),
+            ));
+        }
+
         Ok(Scenario {
             name,
             source: "built-in".into(),
@@ -436,32 +517,108 @@ impl Scenario {
 
 type ErrFn<'a> = dyn Fn(std::ops::Range<usize>, String) -> ScenarioLoadError + 'a;
 
-fn positive<'v>(v: &'v Spanned<f64>, key: &str, err: &ErrFn) -> Result<&'v f64, ScenarioLoadError> {
+/// Bounds of the numbers of a scenario (the lower bounds of the ones that must be
+/// positive keep the physics away from dividing by almost nothing).
+const MASS_KG: (f64, f64) = (0.001, 10.0);
+const MAX_FRICTION: f64 = 2.0;
+const MAX_ODOMETRY_NOISE: f64 = 0.5;
+const MAX_IR_NOISE_SCALE: f64 = 100.0;
+const LOCALIZATION_PERIOD_S: (f64, f64) = (0.01, 3600.0);
+const MAX_LOCALIZATION_NOISE_MM: f64 = 100.0;
+const MAX_LOCALIZATION_NOISE_DEG: f64 = 45.0;
+const MAX_TOLERANCE_MM: f64 = 1000.0;
+const MAX_TOLERANCE_DEG: f64 = 180.0;
+const MAX_PUSHES: i64 = 10_000;
+
+/// Why `name` cannot be a scenario name, if it cannot.
+fn bad_name(name: &str) -> Option<String> {
+    if name.is_empty() {
+        return Some("`name` is empty".into());
+    }
+    if name.chars().count() > MAX_SCENARIO_NAME_LEN {
+        return Some(format!(
+            "`name` is longer than {MAX_SCENARIO_NAME_LEN} characters"
+        ));
+    }
+    if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        return Some(format!(
+            "`name` {name:?} is not a plain name: use letters, digits, `-` and `_` (it names the AG file)"
+        ));
+    }
+    None
+}
+
+/// Space between the robot's body and the object's border at their starts, mm (negative:
+/// they overlap).
+fn start_clearance_mm(object: &ObjectSpec, robot: &RobotSetup) -> f64 {
+    let body_radius = RobotDescription::epuck().body_radius;
+    let o = object.start;
+    let p = DVec2::from_angle(-o.theta).rotate(robot.start.position() - o.position());
+    let to_border = match &object.shape {
+        ObjectShape::Polygon(poly) if poly.contains(p) => -poly.border_distance(p),
+        ObjectShape::Polygon(poly) => poly.border_distance(p),
+        ObjectShape::Circle { radius } => p.length() - radius,
+    };
+    (to_border - body_radius) * 1e3
+}
+
+fn positive_within<'v>(
+    v: &'v Spanned<f64>,
+    key: &str,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+    err: &ErrFn,
+) -> Result<&'v f64, ScenarioLoadError> {
     let x = *v.get_ref();
-    if x.is_finite() && x > 0.0 {
+    if x.is_finite() && x >= lo && x <= hi {
         Ok(v.get_ref())
     } else {
         Err(err(
             v.span(),
-            format!("`{key}` must be a positive number, got {x}"),
+            format!(
+                "`{key}` must be a positive number from {lo} to {hi}{}, got {x}",
+                with_space(unit)
+            ),
         ))
     }
 }
 
-fn non_negative<'v>(
+fn non_negative_within<'v>(
     v: &'v Spanned<f64>,
     key: &str,
+    hi: f64,
+    unit: &str,
     err: &ErrFn,
 ) -> Result<&'v f64, ScenarioLoadError> {
     let x = *v.get_ref();
-    if x.is_finite() && x >= 0.0 {
+    if x.is_finite() && (0.0..=hi).contains(&x) {
         Ok(v.get_ref())
     } else {
         Err(err(
             v.span(),
-            format!("`{key}` must be a non-negative number, got {x}"),
+            format!(
+                "`{key}` must be a non-negative number of at most {hi}{}, got {x}",
+                with_space(unit)
+            ),
         ))
     }
+}
+
+fn with_space(unit: &str) -> String {
+    if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    }
+}
+
+/// Whether a point (mm) lies in the arena.
+fn in_arena(x_mm: f64, y_mm: f64) -> bool {
+    x_mm.abs() <= ARENA_HALF_SIZE_MM && y_mm.abs() <= ARENA_HALF_SIZE_MM
 }
 
 fn pose(p: &Spanned<PoseFile>, key: &str, err: &ErrFn) -> Result<Pose, ScenarioLoadError> {
@@ -470,6 +627,24 @@ fn pose(p: &Spanned<PoseFile>, key: &str, err: &ErrFn) -> Result<Pose, ScenarioL
         return Err(err(
             p.span(),
             format!("`{key}` holds a number that is not finite"),
+        ));
+    }
+    if !in_arena(v.x_mm, v.y_mm) {
+        return Err(err(
+            p.span(),
+            format!(
+                "`{key}` ({}, {}) mm lies beyond the arena's +-{ARENA_HALF_SIZE_MM} mm",
+                v.x_mm, v.y_mm
+            ),
+        ));
+    }
+    if v.theta_deg.abs() > MAX_POSE_ANGLE_DEG {
+        return Err(err(
+            p.span(),
+            format!(
+                "`{key}.theta_deg` is {}, beyond +-{MAX_POSE_ANGLE_DEG} deg",
+                v.theta_deg
+            ),
         ));
     }
     Ok(Pose::new(
@@ -495,24 +670,28 @@ fn localization(
             let l: LocalizationFile = other.clone().try_into().map_err(|e: toml::de::Error| {
                 err(v.span(), format!("`localization`: {}", e.message()))
             })?;
-            if !(l.period_s.is_finite() && l.period_s > 0.0) {
+            let (lo, hi) = LOCALIZATION_PERIOD_S;
+            if !(l.period_s.is_finite() && (lo..=hi).contains(&l.period_s)) {
                 return Err(err(
                     v.span(),
                     format!(
-                        "`localization.period_s` must be positive, got {}",
+                        "`localization.period_s` must be positive, from {lo} to {hi} s, got {}",
                         l.period_s
                     ),
                 ));
             }
-            if !(l.noise_mm.is_finite()
-                && l.noise_mm >= 0.0
-                && l.noise_deg.is_finite()
-                && l.noise_deg >= 0.0)
-            {
-                return Err(err(
-                    v.span(),
-                    "`localization` noise must be non-negative and finite".into(),
-                ));
+            for (key, x, hi, unit) in [
+                ("noise_mm", l.noise_mm, MAX_LOCALIZATION_NOISE_MM, "mm"),
+                ("noise_deg", l.noise_deg, MAX_LOCALIZATION_NOISE_DEG, "deg"),
+            ] {
+                if !(x.is_finite() && (0.0..=hi).contains(&x)) {
+                    return Err(err(
+                        v.span(),
+                        format!(
+                            "`localization` noise must be non-negative and finite: `{key}` must be from 0 to {hi} {unit}, got {x}"
+                        ),
+                    ));
+                }
             }
             Ok(Some(Localization {
                 period_s: l.period_s,
@@ -545,10 +724,19 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
     let (tolerance_m, tolerance_rad) = match &t.tolerance {
         Some(tol) => {
             let v = tol.get_ref();
-            if !(v.mm.is_finite() && v.mm > 0.0 && v.deg.is_finite() && v.deg > 0.0) {
+            if !(v.mm.is_finite()
+                && v.mm > 0.0
+                && v.mm <= MAX_TOLERANCE_MM
+                && v.deg.is_finite()
+                && v.deg > 0.0
+                && v.deg <= MAX_TOLERANCE_DEG)
+            {
                 return Err(err(
                     tol.span(),
-                    "`tolerance` must hold positive `mm` and `deg`".into(),
+                    format!(
+                        "`tolerance` must hold positive `mm` (at most {MAX_TOLERANCE_MM}) and `deg` (at most {MAX_TOLERANCE_DEG}), got {} mm and {} deg",
+                        v.mm, v.deg
+                    ),
                 ));
             }
             (v.mm * 1e-3, v.deg.to_radians())
@@ -569,6 +757,15 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
                     "`path_mm` holds a number that is not finite".into(),
                 ));
             }
+            if let Some(k) = p.get_ref().iter().position(|q| !in_arena(q[0], q[1])) {
+                return Err(err(
+                    p.span(),
+                    format!(
+                        "`path_mm` point {} lies beyond the arena's +-{ARENA_HALF_SIZE_MM} mm",
+                        k + 1
+                    ),
+                ));
+            }
             p.get_ref()
                 .iter()
                 .map(|q| DVec2::new(q[0], q[1]) * 1e-3)
@@ -583,11 +780,14 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
         None => Vec::new(),
     };
     let max_pushes = match &t.max_pushes {
-        Some(m) if *m.get_ref() > 0 && *m.get_ref() <= u32::MAX as i64 => *m.get_ref() as u32,
+        Some(m) if (1..=MAX_PUSHES).contains(m.get_ref()) => *m.get_ref() as u32,
         Some(m) => {
             return Err(err(
                 m.span(),
-                format!("`max_pushes` must be positive, got {}", m.get_ref()),
+                format!(
+                    "`max_pushes` must be positive, at most {MAX_PUSHES}, got {}",
+                    m.get_ref()
+                ),
             ));
         }
         None => 150,

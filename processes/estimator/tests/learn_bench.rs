@@ -133,6 +133,8 @@ vertices_mm = [[-500, -500], [500, -500], [500, 500], [-500, 500]]
 mass_kg = 0.1
 floor_friction = 0.4
 contact_friction = 0.3
+[robot]
+start = { x_mm = -900, y_mm = 0, theta_deg = 0 }
 "#;
     let scenario = Scenario::parse(text, "huge.toml").expect("a valid scenario");
     let err = run_object(&scenario, &cheap(), &mut |_| {}).expect_err("too large");

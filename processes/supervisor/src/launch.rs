@@ -20,6 +20,11 @@
 //! stop_grace_ms = 3000          # SIGTERM -> SIGKILL delay when stopping; default 3000
 //! ```
 //!
+//! Every number has a limit, named when it is passed: `rate_hz` from 1 to 100000
+//! (`RATE_HZ_RANGE`), `max_restarts` at most 1000, `backoff_ms` and `stop_grace_ms` at
+//! most 60000, at most 32 processes of at most 256 arguments of 4096 bytes. The file and its
+//! scenario are read only if they are regular files of at most 1 MiB.
+//!
 //! Every fault is reported with the file, the 1-based line and what is wrong:
 //! ``launch.toml:12: unknown policy `sometimes`; expected `never`, `on-failure` or `always` ``.
 
@@ -40,6 +45,19 @@ pub const DEFAULT_RATE_HZ: f64 = 640.0;
 
 /// Default delay between SIGTERM and SIGKILL when a process is stopped.
 pub const DEFAULT_STOP_GRACE: Duration = Duration::from_secs(3);
+
+/// Slowest and fastest physics rate a launch file may ask for, steps per second.
+pub const RATE_HZ_RANGE: (f64, f64) = (1.0, 100_000.0);
+/// Most restarts a process may be allowed over a run.
+pub const MAX_RESTARTS_LIMIT: u32 = 1000;
+/// Longest `backoff_ms` and `stop_grace_ms`, milliseconds.
+pub const MAX_DELAY_MS: u64 = 60_000;
+/// Most `[[process]]` entries a launch file may hold.
+pub const MAX_PROCESSES: usize = 32;
+/// Most `args` and most `env` entries of a process.
+pub const MAX_ARGS: usize = 256;
+/// Longest argument, `env` key or `env` value, bytes.
+pub const MAX_ARG_BYTES: usize = 4096;
 
 /// The environment variables `agp up` gives every child; a launch file may not set them.
 pub const CONTEXT_ENV: [&str; 6] = [
@@ -282,7 +300,7 @@ pub struct LaunchFault {
 pub enum LaunchFaultKind {
     /// The file could not be read.
     #[error("cannot read the launch file: {0}")]
-    Read(#[source] std::io::Error),
+    Read(#[source] agp_world::BoundedReadError),
     /// Not TOML, an unknown key, a missing key or a value of the wrong type (toml's words).
     #[error("{0}")]
     Toml(String),
@@ -309,9 +327,20 @@ pub enum LaunchFaultKind {
     /// `clock.mode` is not a clock mode.
     #[error("unknown clock mode `{0}`; expected `lockstep` or `realtime`")]
     UnknownClockMode(String),
-    /// `clock.rate_hz` is zero, negative or not finite.
-    #[error("`rate_hz` must be a positive number of steps per second, got {0}")]
+    /// `clock.rate_hz` is not within `RATE_HZ_RANGE`.
+    #[error(
+        "`rate_hz` must be a positive number of steps per second from {lo} to {hi}, got {0}",
+        lo = RATE_HZ_RANGE.0,
+        hi = RATE_HZ_RANGE.1
+    )]
     BadRate(f64),
+    /// A number or a list beyond its limit.
+    #[error("`{key}` must be {limit}, got {value}")]
+    OutOfBounds {
+        key: &'static str,
+        limit: String,
+        value: String,
+    },
     /// No `[[process]]` entry.
     #[error("no `[[process]]` entry: a launch file starts at least one process")]
     NoProcess,
@@ -363,22 +392,21 @@ struct RawClock {
 struct RawProcess {
     name: Spanned<String>,
     exec: Spanned<String>,
-    #[serde(default)]
-    args: Vec<String>,
+    args: Option<Spanned<Vec<String>>>,
     #[serde(default)]
     env: BTreeMap<Spanned<String>, String>,
     restart: Option<RawRestart>,
     #[serde(default)]
     ends_run: bool,
-    stop_grace_ms: Option<u64>,
+    stop_grace_ms: Option<Spanned<u64>>,
 }
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawRestart {
     policy: Option<Spanned<String>>,
-    max_restarts: Option<u32>,
-    backoff_ms: Option<u64>,
+    max_restarts: Option<Spanned<u32>>,
+    backoff_ms: Option<Spanned<u64>>,
 }
 
 /// Collects faults while the whole file is checked.
@@ -413,9 +441,11 @@ fn line_at(text: &str, offset: usize) -> usize {
 }
 
 impl LaunchConfig {
-    /// Reads and validates the launch file at `path`.
+    /// Reads and validates the launch file at `path`: a regular file (a FIFO or a link to
+    /// a device is refused without blocking) of at most
+    /// [`agp_world::MAX_CONFIG_FILE_BYTES`].
     pub fn load(path: &Path, options: &LaunchOptions) -> Result<Self, LaunchConfigParseError> {
-        match std::fs::read_to_string(path) {
+        match agp_world::read_regular_text(path, agp_world::MAX_CONFIG_FILE_BYTES) {
             Ok(text) => Self::parse(&text, path, options),
             Err(e) => Err(LaunchConfigParseError {
                 file: path.to_owned(),
@@ -489,6 +519,16 @@ impl LaunchConfig {
 
         if raw.process.is_empty() {
             check.fault(LaunchFaultKind::NoProcess);
+        }
+        if let Some(extra) = raw.process.get(MAX_PROCESSES) {
+            check.fault_at(
+                extra,
+                LaunchFaultKind::OutOfBounds {
+                    key: "process",
+                    limit: format!("at most {MAX_PROCESSES} entries (MAX_PROCESSES)"),
+                    value: format!("{} entries", raw.process.len()),
+                },
+            );
         }
         let mut processes = Vec::with_capacity(raw.process.len());
         let mut first_lines: BTreeMap<String, usize> = BTreeMap::new();
@@ -576,7 +616,8 @@ fn resolve_scenario(check: &mut Checker<'_>, raw: &Spanned<String>, base: &Path)
         return ScenarioSource::Builtin(name.clone());
     }
     let path = base.join(name);
-    if name.is_empty() || !path.is_file() {
+    // Anything that exists is loaded, so that a FIFO or a device is refused as what it is.
+    if name.is_empty() || !path.exists() {
         check.fault_at(
             raw,
             LaunchFaultKind::UnknownScenario {
@@ -614,7 +655,7 @@ fn resolve_clock(check: &mut Checker<'_>, raw: Option<&RawClock>) -> ClockConfig
     }
     if let Some(rate) = &raw.rate_hz {
         let r = *rate.as_ref();
-        if r.is_finite() && r > 0.0 {
+        if r.is_finite() && (RATE_HZ_RANGE.0..=RATE_HZ_RANGE.1).contains(&r) {
             clock.rate_hz = r;
         } else {
             check.fault_at(rate, LaunchFaultKind::BadRate(r));
@@ -657,6 +698,8 @@ fn resolve_process(
             Some("not a variable name")
         } else if value.contains('\0') {
             Some("the value holds a NUL byte")
+        } else if k.len() > MAX_ARG_BYTES || value.len() > MAX_ARG_BYTES {
+            Some("longer than 4096 bytes (MAX_ARG_BYTES)")
         } else if k == WaitStrategy::ENV && WaitStrategy::parse(value).is_none() {
             Some(WaitStrategy::NOT_A_STRATEGY)
         } else {
@@ -687,24 +730,85 @@ fn resolve_process(
                 other => check.fault_at(policy, LaunchFaultKind::UnknownPolicy(other.to_owned())),
             }
         }
-        if let Some(max) = raw.max_restarts {
-            restart.max_restarts = max;
+        if let Some(max) = &raw.max_restarts {
+            if *max.as_ref() > MAX_RESTARTS_LIMIT {
+                check.fault_at(
+                    max,
+                    LaunchFaultKind::OutOfBounds {
+                        key: "max_restarts",
+                        limit: format!("at most {MAX_RESTARTS_LIMIT} (MAX_RESTARTS_LIMIT)"),
+                        value: max.as_ref().to_string(),
+                    },
+                );
+            }
+            restart.max_restarts = *max.as_ref();
         }
-        if let Some(ms) = raw.backoff_ms {
-            restart.backoff = Duration::from_millis(ms);
+        if let Some(ms) = &raw.backoff_ms {
+            check_delay(check, ms, "backoff_ms");
+            restart.backoff = Duration::from_millis(*ms.as_ref());
         }
+    }
+    if let Some(ms) = &p.stop_grace_ms {
+        check_delay(check, ms, "stop_grace_ms");
+    }
+    let args: &[String] = p.args.as_ref().map_or(&[], |a| a.as_ref());
+    let bad_arg = args.iter().enumerate().find_map(|(k, a)| {
+        if a.contains('\0') {
+            Some(format!("argument {} with a NUL byte", k + 1))
+        } else if a.len() > MAX_ARG_BYTES {
+            Some(format!("argument {} of {} bytes", k + 1, a.len()))
+        } else {
+            None
+        }
+    });
+    let too_many = (args.len() > MAX_ARGS).then(|| format!("{} arguments", args.len()));
+    if let (Some(value), Some(at)) = (too_many.or(bad_arg), &p.args) {
+        check.fault_at(
+            at,
+            LaunchFaultKind::OutOfBounds {
+                key: "args",
+                limit: format!(
+                    "at most {MAX_ARGS} arguments (MAX_ARGS) of at most {MAX_ARG_BYTES} bytes (MAX_ARG_BYTES) without NUL"
+                ),
+                value,
+            },
+        );
+    }
+    if p.env.len() > MAX_ARGS {
+        check.fault_at(
+            &p.name,
+            LaunchFaultKind::OutOfBounds {
+                key: "env",
+                limit: format!("at most {MAX_ARGS} entries (MAX_ARGS)"),
+                value: format!("{} entries", p.env.len()),
+            },
+        );
     }
 
     ProcessConfig {
         name,
         exec,
-        args: p.args.clone(),
+        args: args.to_vec(),
         env,
         restart,
         ends_run: p.ends_run,
         stop_grace: p
             .stop_grace_ms
-            .map_or(DEFAULT_STOP_GRACE, Duration::from_millis),
+            .as_ref()
+            .map_or(DEFAULT_STOP_GRACE, |ms| Duration::from_millis(*ms.as_ref())),
+    }
+}
+
+fn check_delay(check: &mut Checker<'_>, ms: &Spanned<u64>, key: &'static str) {
+    if *ms.as_ref() > MAX_DELAY_MS {
+        check.fault_at(
+            ms,
+            LaunchFaultKind::OutOfBounds {
+                key,
+                limit: format!("at most {MAX_DELAY_MS} ms (MAX_DELAY_MS)"),
+                value: format!("{} ms", ms.as_ref()),
+            },
+        );
     }
 }
 

@@ -304,7 +304,8 @@ fn an_object_too_large_for_the_gradient_fails_before_any_object_is_learned() {
     std::fs::write(
         &huge,
         "name = \"huge\"\n[object]\nshape = \"circle\"\nradius_mm = 400\n\
-         mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
+         mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n\
+         [robot]\nstart = { x_mm = -700, y_mm = 0, theta_deg = 0 }\n",
     )
     .expect("write the scenario");
     let out = dir.path().join("ags");
