@@ -1,5 +1,7 @@
 //! The supervisor's control service: `agp status` and `agp down` ask the running `agp up`
 //! of an instance through iceoryx2 request-response, never through files or signals.
+//! `agp profile` holds a pause lease through it: the supervisor pauses the pipeline until
+//! the lease's deadline, so a profiler that dies leaves it paused no longer than that.
 
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::request_response;
@@ -17,6 +19,13 @@ pub const STATUS_PATH_LEN: usize = 256;
 pub const STATUS_TOPIC_LEN: usize = 16;
 /// Room for a swap's planner arguments, NUL-separated, bytes.
 pub const SWAP_ARGS_LEN: usize = 1024;
+/// Most strangers (live nodes of the instance the supervisor did not start) a status reply
+/// names.
+pub const MAX_STATUS_STRANGERS: usize = 8;
+/// Longest node name a status reply carries for a stranger, bytes.
+pub const STATUS_NODE_NAME_LEN: usize = 64;
+/// Longest pause lease the supervisor grants at once; a holder that needs longer renews.
+pub const MAX_PAUSE_LEASE: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// What the client asks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,6 +42,13 @@ pub enum ControlKind {
     /// From a swapped-in planner: its first command was applied, `value_ns` after its
     /// `Ready` (the handover time).
     Driving = 5,
+    /// Pause the pipeline's processes (SIGSTOP to each one's process group) for `value_ns`
+    /// from now (at most [`MAX_PAUSE_LEASE`]): a lease held by `pid`. Asked again by its
+    /// holder, it renews the deadline. The supervisor resumes them (SIGCONT) at the
+    /// deadline, on [`ControlKind::Resume`] or at the end of the run, whichever comes first.
+    Pause = 6,
+    /// Release the pause lease held by `pid`: the processes run again.
+    Resume = 7,
 }
 
 impl ControlKind {
@@ -43,6 +59,8 @@ impl ControlKind {
             Self::SwapPlanner,
             Self::Ready,
             Self::Driving,
+            Self::Pause,
+            Self::Resume,
         ]
         .into_iter()
         .find(|k| *k as u32 == v)
@@ -56,11 +74,13 @@ impl ControlKind {
 pub struct ControlRequest {
     /// A [`ControlKind`] as u32.
     pub kind: u32,
-    pub _pad: u32,
+    /// [`ControlKind::Pause`], [`ControlKind::Resume`]: the lease holder's process id.
+    pub pid: u32,
     /// [`ControlKind::Ready`], [`ControlKind::Driving`]: the planner's epoch.
     pub epoch: u64,
     /// [`ControlKind::Driving`]: the handover time; [`ControlKind::SwapPlanner`]: how
-    /// long the new planner may take to become ready and drive (0: the default).
+    /// long the new planner may take to become ready and drive (0: the default);
+    /// [`ControlKind::Pause`]: how long the lease lasts from now.
     pub value_ns: u64,
     /// [`ControlKind::SwapPlanner`]: the process to swap (UTF-8, zero-padded).
     pub name: [u8; STATUS_NAME_LEN],
@@ -78,7 +98,7 @@ impl Default for ControlRequest {
     fn default() -> Self {
         Self {
             kind: 0,
-            _pad: 0,
+            pid: 0,
             epoch: 0,
             value_ns: 0,
             name: [0; STATUS_NAME_LEN],
@@ -196,10 +216,33 @@ impl Default for ProcessStatus {
     }
 }
 
+/// A live node of the instance that is neither the supervisor's nor one of its
+/// processes' nor a client's (`agp status`, `agp profile`): a process that joined the
+/// instance on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::StrangerStatus.v1")]
+pub struct StrangerStatus {
+    pub pid: u32,
+    pub _pad: u32,
+    /// The node's name (UTF-8, zero-padded; empty: the node has none).
+    pub name: [u8; STATUS_NODE_NAME_LEN],
+}
+
+impl Default for StrangerStatus {
+    fn default() -> Self {
+        Self {
+            pid: 0,
+            _pad: 0,
+            name: [0; STATUS_NODE_NAME_LEN],
+        }
+    }
+}
+
 /// The supervisor's answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ControlResponse.v3")]
+#[type_name("agp::ControlResponse.v4")]
 pub struct ControlResponse {
     /// The [`ControlKind`] answered.
     pub kind: u32,
@@ -220,6 +263,14 @@ pub struct ControlResponse {
     /// processes different ones (UTF-8, zero-padded).
     pub waiting: [u8; STATUS_NAME_LEN],
     pub processes: [ProcessStatus; MAX_STATUS_PROCESSES],
+    /// Processes paused by a pause lease now (0: none).
+    pub paused: u32,
+    /// How many entries of `strangers` are set.
+    pub stranger_count: u32,
+    /// Time left of the pause lease, ms (0: no lease).
+    pub pause_left_ms: u64,
+    /// [`ControlKind::Status`]: the strangers on the instance.
+    pub strangers: [StrangerStatus; MAX_STATUS_STRANGERS],
 }
 
 impl Default for ControlResponse {
@@ -235,6 +286,10 @@ impl Default for ControlResponse {
             message: [0; STATUS_PATH_LEN],
             waiting: [0; STATUS_NAME_LEN],
             processes: [ProcessStatus::default(); MAX_STATUS_PROCESSES],
+            paused: 0,
+            stranger_count: 0,
+            pause_left_ms: 0,
+            strangers: [StrangerStatus::default(); MAX_STATUS_STRANGERS],
         }
     }
 }
@@ -244,8 +299,16 @@ const _: () = {
     assert!(core::mem::size_of::<ActiveEpoch>() == 16);
     assert!(core::mem::size_of::<ProcessStatus>() == 344);
     assert!(core::mem::align_of::<ProcessStatus>() == 8);
+    assert!(core::mem::size_of::<StrangerStatus>() == 8 + STATUS_NODE_NAME_LEN);
     assert!(
-        core::mem::size_of::<ControlResponse>() == 24 + 16 + 256 + 32 + 344 * MAX_STATUS_PROCESSES
+        core::mem::size_of::<ControlResponse>()
+            == 24
+                + 16
+                + 256
+                + 32
+                + 344 * MAX_STATUS_PROCESSES
+                + 16
+                + (8 + STATUS_NODE_NAME_LEN) * MAX_STATUS_STRANGERS
     );
 };
 

@@ -7,7 +7,9 @@ use iceoryx2::prelude::Node;
 
 use crate::control::ActiveEpoch;
 use crate::instance::Instance;
-use crate::payloads::{GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset};
+use crate::payloads::{
+    GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset, session_token_from_env,
+};
 use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
 use crate::{AgpIpc, monotonic_ns, stage};
 
@@ -45,6 +47,11 @@ pub enum DriveError {
 ///
 /// With `ground_truth`, it also reads the true poses: that makes it an evaluation tool, which
 /// no estimator or planner may be.
+///
+/// Every command and reset carries the token the supervisor handed this process in
+/// `AGP_TOKEN` ([`crate::SessionKey::token`] of its epoch; 0 without one): a physics the
+/// supervisor started applies nothing else. A physics started without a session key (by
+/// hand, by the probe or a benchmark's private pipeline) takes every command.
 pub struct LockstepDriver {
     _node: Node<AgpIpc>,
     frames: Subscriber<AgpIpc, IrFrame, ()>,
@@ -59,6 +66,8 @@ pub struct LockstepDriver {
     awaited: Option<Awaited>,
     last_truth: GroundTruth,
     epoch: u64,
+    /// The token of `epoch` every command and reset carries.
+    token: u64,
     timeout: Duration,
     resets_sent: u64,
     /// `trace_id - step` of the physics process being driven: each run of physics has its
@@ -196,6 +205,7 @@ impl LockstepDriver {
             awaited: Some(Awaited::Any),
             last_truth: GroundTruth::default(),
             epoch,
+            token: session_token_from_env(),
             timeout,
             resets_sent: 0,
             trace_base: 0,
@@ -358,6 +368,7 @@ impl LockstepDriver {
             epoch: self.epoch,
             left_mps,
             right_mps,
+            token: self.token,
             ..MotorCommand::default()
         };
         // The frame's trace and its stamps up to the planner's receive (with the
@@ -407,6 +418,7 @@ impl LockstepDriver {
                 object,
                 robot,
                 epoch: self.epoch,
+                token: self.token,
             })
             .send()
             .map_err(|e| DriveError::Port(format!("send of a reset: {e:?}")))?;

@@ -47,6 +47,75 @@ impl std::fmt::Display for InstanceNameError {
 
 impl std::error::Error for InstanceNameError {}
 
+/// Why an instance's folder (the base folder of every instance's root, or the instance's
+/// own root folder) could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum InstanceDirError {
+    /// It is a link or a file, not a folder.
+    #[error(
+        "{} is not a folder (a symbolic link or another file); remove it, or set {ROOT_ENV} to a folder of your own",
+        path.display()
+    )]
+    NotAFolder { path: PathBuf },
+    /// Another user owns it.
+    #[error(
+        "{} belongs to uid {owner}, not to this user (uid {uid}); set {ROOT_ENV} to a folder of your own",
+        path.display()
+    )]
+    NotOurs { path: PathBuf, owner: u32, uid: u32 },
+    /// It could not be created, opened or tightened.
+    #[error("cannot prepare the folder {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Creates `path` (mode 0700) unless it exists, then checks it without following a link:
+/// a folder, ours, and tightened to 0700 if group or others have any access.
+fn secure_dir(path: &Path) -> Result<(), InstanceDirError> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, OpenOptionsExt, PermissionsExt};
+
+    let io = |source| InstanceDirError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    match std::fs::DirBuilder::new().mode(0o700).create(path) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(io(e)),
+    }
+    let dir = match std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_DIRECTORY | libc::O_CLOEXEC)
+        .open(path)
+    {
+        Ok(d) => d,
+        Err(e) if matches!(e.raw_os_error(), Some(libc::ELOOP | libc::ENOTDIR)) => {
+            return Err(InstanceDirError::NotAFolder {
+                path: path.to_path_buf(),
+            });
+        }
+        Err(e) => return Err(io(e)),
+    };
+    let meta = dir.metadata().map_err(io)?;
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    if meta.uid() != uid {
+        return Err(InstanceDirError::NotOurs {
+            path: path.to_path_buf(),
+            owner: meta.uid(),
+            uid,
+        });
+    }
+    if meta.mode() & 0o077 != 0 {
+        dir.set_permissions(std::fs::Permissions::from_mode(0o700))
+            .map_err(io)?;
+    }
+    Ok(())
+}
+
 /// Names of the services of one instance. Every topic is paired with an event service its
 /// publisher notifies after each send, so a reader can block instead of polling. Topics
 /// read by the same waiting loop share one event service: physics waits on
@@ -86,9 +155,14 @@ pub struct Instance {
 /// Where instance roots live unless [`ROOT_ENV`] says otherwise.
 const DEFAULT_ROOT_BASE: &str = "/tmp/agp";
 
+/// The character that ends the instance name in every file name of an instance: one that
+/// [`Instance::validate_name`] refuses and iceoryx2's `FileName` accepts.
+const NAME_END: char = '.';
+
 impl Instance {
-    /// Builds the config of instance `name`: prefix `agp_<name>_`, root folder
-    /// `<base>/<name>/` (base `/tmp/agp`, or `$AGP_IOX2_ROOT`).
+    /// Builds the config of instance `name`: prefix `agp_<name>.`, root folder
+    /// `<base>/<name>/` (base `/tmp/agp`, or `$AGP_IOX2_ROOT`). Nothing is created here:
+    /// [`Instance::prepare_dirs`] makes the folders, and every node does it first.
     pub fn new(name: &str) -> Result<Self, InstanceNameError> {
         Self::validate_name(name)?;
         let base = std::env::var_os(ROOT_ENV)
@@ -130,8 +204,11 @@ impl Instance {
         Ok(())
     }
 
+    /// The `.` ends the name: instance names cannot hold one (iceoryx2's file names can),
+    /// so the files of `pc` (`agp_pc.…`) and of `pc_x` (`agp_pc_x.…`) never share a prefix,
+    /// for our cleaning nor for iceoryx2's own listing of `/dev/shm`.
     fn prefix_of(name: &str) -> String {
-        format!("agp_{name}_")
+        format!("agp_{name}{NAME_END}")
     }
 
     pub fn name(&self) -> &str {
@@ -142,7 +219,8 @@ impl Instance {
         &self.config
     }
 
-    /// The prefix of every file of this instance in `/dev/shm`.
+    /// The prefix of every file of this instance in `/dev/shm`, ending in a character no
+    /// instance name holds: a file starts with it exactly when it is this instance's.
     pub fn shm_prefix(&self) -> String {
         Self::prefix_of(&self.name)
     }
@@ -150,6 +228,29 @@ impl Instance {
     /// The instance's iceoryx2 root folder.
     pub fn root_dir(&self) -> &Path {
         &self.root
+    }
+
+    /// Makes the base folder (`/tmp/agp` or `$AGP_IOX2_ROOT`) and the instance's root folder
+    /// safe to use: each is created mode 0700 if missing, opened without following a link,
+    /// refused if it is not a folder or belongs to another user, and tightened to 0700 if it
+    /// is ours but open to group or others (a base created 0755 by an earlier version).
+    pub fn prepare_dirs(&self) -> Result<(), InstanceDirError> {
+        self.prepare_base()?;
+        secure_dir(&self.root)
+    }
+
+    /// [`Instance::prepare_dirs`] for the base folder alone (where the instance locks live).
+    pub fn prepare_base(&self) -> Result<(), InstanceDirError> {
+        let base = self.root.parent().unwrap_or_else(|| Path::new("/"));
+        if let Some(above) = base.parent()
+            && !above.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(above).map_err(|source| InstanceDirError::Io {
+                path: above.to_path_buf(),
+                source,
+            })?;
+        }
+        secure_dir(base)
     }
 
     /// Creates a node of this instance. With `handle_signals`, iceoryx2 installs its
@@ -165,11 +266,17 @@ impl Instance {
     /// [`Instance::node`] for another iceoryx2 service type (`bench-hop` measures
     /// iceoryx2's own `ipc::Service` beside [`AgpIpc`]). Processes of one pipeline all use
     /// [`AgpIpc`].
+    ///
+    /// The instance's folders are made safe first ([`Instance::prepare_dirs`]); a folder
+    /// that cannot be is `InsufficientPermissions` (the supervisor calls `prepare_dirs`
+    /// itself, before any child, to say why).
     pub fn node_of<S: iceoryx2::service::Service>(
         &self,
         node_name: &str,
         handle_signals: bool,
     ) -> Result<Node<S>, NodeCreationFailure> {
+        self.prepare_dirs()
+            .map_err(|_| NodeCreationFailure::InsufficientPermissions)?;
         let mut builder = NodeBuilder::new().config(&self.config);
         if let Ok(n) = NodeName::new(node_name) {
             builder = builder.name(&n);
@@ -187,7 +294,7 @@ impl Instance {
     /// its root folder.
     pub fn files(&self) -> Vec<PathBuf> {
         let mut files = instance_files_in(Path::new("/dev/shm"), &self.shm_prefix());
-        if self.root.exists() {
+        if self.root.symlink_metadata().is_ok() {
             files.push(self.root.clone());
         }
         files
@@ -204,7 +311,7 @@ impl Instance {
                 Err(e) => return Err(e),
             }
         }
-        if self.root.exists() {
+        if self.root.symlink_metadata().is_ok() {
             std::fs::remove_dir_all(&self.root)?;
             removed += 1;
         }
@@ -336,7 +443,9 @@ impl Qos {
     }
 }
 
-/// Files in `dir` whose name starts with `prefix`.
+/// Files in `dir` whose name starts with `prefix`. With an instance's
+/// [`Instance::shm_prefix`], which ends in a character no instance name holds, these are
+/// exactly that instance's files.
 pub fn instance_files_in(dir: &Path, prefix: &str) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();

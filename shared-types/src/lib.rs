@@ -12,19 +12,21 @@ pub mod alloc_count;
 mod control;
 mod driver;
 mod instance;
+mod owner_only_storage;
 mod payloads;
 mod service;
 mod wait;
 
 pub use control::{
     ActiveEpoch, ControlAskError, ControlClient, ControlKind, ControlOpenError, ControlRequest,
-    ControlResponse, ControlService, MAX_STATUS_PROCESSES, ProcessState, ProcessStatus,
-    SWAP_ARGS_LEN, read_str, write_str,
+    ControlResponse, ControlService, MAX_PAUSE_LEASE, MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS,
+    ProcessState, ProcessStatus, STATUS_NODE_NAME_LEN, SWAP_ARGS_LEN, StrangerStatus, read_str,
+    write_str,
 };
 pub use driver::{DriveError, LockstepDriver};
 pub use instance::{
-    Instance, InstanceNameError, MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, ServiceNames, Topic,
-    instance_files_in,
+    Instance, InstanceDirError, InstanceNameError, MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV,
+    ServiceNames, Topic, instance_files_in,
 };
 pub use payloads::*;
 pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};

@@ -103,7 +103,7 @@ pub struct IrFrame {
 /// Wheel speeds for one control step.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::MotorCommand.v1")]
+#[type_name("agp::MotorCommand.v2")]
 pub struct MotorCommand {
     pub timing: TimingHeader,
     /// The step of the IR frame this command answers; in lockstep physics applies it to
@@ -114,13 +114,16 @@ pub struct MotorCommand {
     /// Left and right wheel surface speeds, m/s (clamped to the robot's maximum by physics).
     pub left_mps: f64,
     pub right_mps: f64,
+    /// The sender's [`SessionKey::token`] for `epoch` (from `AGP_TOKEN`): physics started
+    /// with a session key applies only commands that carry the token of their epoch.
+    pub token: u64,
 }
 
 /// Puts the world in a known state: object and robot poses, and odometry reset to the
 /// robot's true pose. Applied by physics between two steps.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::Reset.v2")]
+#[type_name("agp::Reset.v3")]
 pub struct Reset {
     /// Chosen by the sender, echoed in [`IrFrame::reset_seq`] once applied.
     pub seq: u64,
@@ -129,6 +132,8 @@ pub struct Reset {
     /// The sender's planner epoch: physics applies resets of the active epoch only, so a
     /// planner being swapped out cannot move the world.
     pub epoch: u64,
+    /// The sender's token for `epoch`, as [`MotorCommand::token`].
+    pub token: u64,
 }
 
 /// The true state of the world: for evaluation, the probe and the `oracle` planner only.
@@ -149,7 +154,7 @@ pub struct GroundTruth {
 /// The estimator's belief about the object, in the robot's odometry frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ObjectEstimate.v1")]
+#[type_name("agp::ObjectEstimate.v2")]
 pub struct ObjectEstimate {
     pub timing: TimingHeader,
     /// The step of the IR frame this estimate derives from.
@@ -162,11 +167,37 @@ pub struct ObjectEstimate {
     pub valid: u8,
     /// 1 while contact with the object is inferred from the IR readings.
     pub contact: u8,
-    pub _pad: [u8; 6],
+    /// The estimator's learning, an [`EstimatorLearning`] as u8.
+    pub learning: u8,
+    pub _pad: [u8; 5],
     /// The inferred contact point (odometry frame), valid when `contact` is 1.
     pub contact_point: [f64; 2],
     /// Bumped each time a new set of gradient grids is published.
     pub grids_seq: u64,
+    /// When the estimator that sent it started (CLOCK_MONOTONIC, ns): a larger value than
+    /// the one a reader knows means the estimator restarted (and lost what it learned).
+    pub estimator_start_ns: u64,
+}
+
+/// What the estimator does about learning, as [`ObjectEstimate::learning`] tells it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum EstimatorLearning {
+    /// Not learning: it serves (or has served) gradients loaded or learned.
+    No = 0,
+    /// It learns, but no planner has sent a learning event yet: it has no gradients and
+    /// publishes none until a planner drives the learning protocol.
+    Waiting = 1,
+    /// A planner drives the learning protocol.
+    UnderWay = 2,
+}
+
+impl EstimatorLearning {
+    pub fn from_u8(v: u8) -> Option<Self> {
+        [Self::No, Self::Waiting, Self::UnderWay]
+            .into_iter()
+            .find(|k| *k as u8 == v)
+    }
 }
 
 /// Number of grids the estimator publishes per learned alpha: one of each [`GridKind`].
@@ -322,10 +353,10 @@ const _: () = {
     assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
     assert!(size_of::<IrFrame>() == 72 * 2 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
-    assert!(size_of::<MotorCommand>() == 72 + 32 && align_of::<MotorCommand>() == 8);
-    assert!(size_of::<Reset>() == 64 && align_of::<Reset>() == 8);
+    assert!(size_of::<MotorCommand>() == 72 + 40 && align_of::<MotorCommand>() == 8);
+    assert!(size_of::<Reset>() == 72 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
-    assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8);
+    assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8 + 8);
     assert!(size_of::<GridHeader>() == 8 + 4 * 4 + 8 * 8 && align_of::<GridHeader>() == 8);
     assert!(size_of::<GradientGrid>() == 88 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
     assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
@@ -391,10 +422,14 @@ impl LearnEventKind {
 /// next frame, so a reader that drains events before each frame sees them in order.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::LearnEvent.v1")]
+#[type_name("agp::LearnEvent.v2")]
 pub struct LearnEvent {
     /// Running count of the sender's events.
     pub seq: u64,
+    /// The learning run the event belongs to, chosen by the planner when it starts the
+    /// protocol (non-zero): an event of another session than the estimator's makes it drop
+    /// what it learned and start over, so a restarted planner counts no trial twice.
+    pub session: u64,
     /// A [`LearnEventKind`] as u32.
     pub kind: u32,
     /// Trial or test-push index.
@@ -489,7 +524,7 @@ pub struct LearnReport {
 const _: () = {
     use core::mem::{align_of, size_of};
     assert!(
-        size_of::<LearnEvent>() == 8 + 16 + 8 + 16 + 24 + 8 + 32 + 24
+        size_of::<LearnEvent>() == 8 + 8 + 16 + 8 + 16 + 24 + 8 + 32 + 24
             && align_of::<LearnEvent>() == 8
     );
     assert!(
@@ -497,3 +532,154 @@ const _: () = {
             && align_of::<LearnReport>() == 8
     );
 };
+
+/// The environment variable that hands physics its instance run's [`SessionKey`] (hex).
+pub const SESSION_KEY_ENV: &str = "AGP_SESSION_KEY";
+
+/// The environment variable that hands a planner its epoch's token (decimal), from
+/// [`SessionKey::token`].
+pub const SESSION_TOKEN_ENV: &str = "AGP_TOKEN";
+
+/// The secret of one `agp up` run: the supervisor makes one, hands it to physics alone and
+/// hands each process it starts the token of its epoch, so physics can tell the
+/// supervisor's planners from any other process that joined the instance. The token is
+/// SipHash-2-4 of the epoch under the key: without the key, no token of an epoch can be
+/// made from the tokens of others.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct SessionKey([u8; 16]);
+
+impl std::fmt::Debug for SessionKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SessionKey(..)")
+    }
+}
+
+impl SessionKey {
+    /// A fresh random key (the kernel's `getrandom`).
+    pub fn random() -> std::io::Result<Self> {
+        let mut key = [0u8; 16];
+        let mut filled = 0;
+        while filled < key.len() {
+            // SAFETY: getrandom writes at most `len - filled` bytes into the buffer we own.
+            let n = unsafe {
+                libc::getrandom(key[filled..].as_mut_ptr().cast(), key.len() - filled, 0)
+            };
+            if n < 0 {
+                let e = std::io::Error::last_os_error();
+                if e.kind() != std::io::ErrorKind::Interrupted {
+                    return Err(e);
+                }
+                continue;
+            }
+            filled += n as usize;
+        }
+        Ok(Self(key))
+    }
+
+    /// The key as 32 lowercase hex digits (what [`SESSION_KEY_ENV`] holds).
+    pub fn to_hex(&self) -> String {
+        self.0.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The key from 32 hex digits; `None` if `s` is not that.
+    pub fn from_hex(s: &str) -> Option<Self> {
+        let s = s.trim();
+        if s.len() != 32 || !s.is_ascii() {
+            return None;
+        }
+        let mut key = [0u8; 16];
+        for (k, b) in key.iter_mut().enumerate() {
+            *b = u8::from_str_radix(&s[2 * k..2 * k + 2], 16).ok()?;
+        }
+        Some(Self(key))
+    }
+
+    /// The key in [`SESSION_KEY_ENV`]: `Ok(None)` when it is not set, an error naming the
+    /// variable when it is set but not 32 hex digits.
+    pub fn from_env() -> Result<Option<Self>, String> {
+        match std::env::var(SESSION_KEY_ENV) {
+            Err(std::env::VarError::NotPresent) => Ok(None),
+            Ok(v) => Self::from_hex(&v)
+                .map(Some)
+                .ok_or_else(|| format!("`{SESSION_KEY_ENV}` is not 32 hex digits")),
+            Err(std::env::VarError::NotUnicode(_)) => {
+                Err(format!("`{SESSION_KEY_ENV}` is not 32 hex digits"))
+            }
+        }
+    }
+
+    /// The token of planner epoch `epoch` under this key (never 0: 0 means "no token").
+    pub fn token(&self, epoch: u64) -> u64 {
+        let k0 = u64::from_le_bytes(self.0[..8].try_into().unwrap_or_default());
+        let k1 = u64::from_le_bytes(self.0[8..].try_into().unwrap_or_default());
+        siphash24(k0, k1, epoch).max(1)
+    }
+}
+
+/// The token in [`SESSION_TOKEN_ENV`], 0 when it is not set or not a number.
+pub fn session_token_from_env() -> u64 {
+    std::env::var(SESSION_TOKEN_ENV)
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// SipHash-2-4 of one little-endian u64 message under the key `(k0, k1)`.
+fn siphash24(k0: u64, k1: u64, m: u64) -> u64 {
+    let mut v = [
+        k0 ^ 0x736f_6d65_7073_6575,
+        k1 ^ 0x646f_7261_6e64_6f6d,
+        k0 ^ 0x6c79_6765_6e65_7261,
+        k1 ^ 0x7465_6462_7974_6573,
+    ];
+    fn round(v: &mut [u64; 4]) {
+        v[0] = v[0].wrapping_add(v[1]);
+        v[1] = v[1].rotate_left(13) ^ v[0];
+        v[0] = v[0].rotate_left(32);
+        v[2] = v[2].wrapping_add(v[3]);
+        v[3] = v[3].rotate_left(16) ^ v[2];
+        v[0] = v[0].wrapping_add(v[3]);
+        v[3] = v[3].rotate_left(21) ^ v[0];
+        v[2] = v[2].wrapping_add(v[1]);
+        v[1] = v[1].rotate_left(17) ^ v[2];
+        v[2] = v[2].rotate_left(32);
+    }
+    // The message's one 8-byte block, then the final block holding its length (8) only.
+    for block in [m, 8u64 << 56] {
+        v[3] ^= block;
+        round(&mut v);
+        round(&mut v);
+        v[0] ^= block;
+    }
+    v[2] ^= 0xff;
+    for _ in 0..4 {
+        round(&mut v);
+    }
+    v[0] ^ v[1] ^ v[2] ^ v[3]
+}
+
+#[cfg(test)]
+mod session_key_tests {
+    use super::*;
+
+    #[test]
+    fn siphash_matches_the_reference_vector_of_an_eight_byte_message() {
+        // SipHash-2-4 of message 00..07 under key 00..0f (the reference implementation's
+        // vector, as std's `SipHasher` gives it too).
+        let k0 = u64::from_le_bytes([0, 1, 2, 3, 4, 5, 6, 7]);
+        let k1 = u64::from_le_bytes([8, 9, 10, 11, 12, 13, 14, 15]);
+        let m = u64::from_le_bytes([0, 1, 2, 3, 4, 5, 6, 7]);
+        assert_eq!(siphash24(k0, k1, m), 0x93f5_f579_9a93_2462);
+    }
+
+    #[test]
+    fn a_key_survives_its_hex_form_and_two_keys_give_different_tokens() {
+        let a = SessionKey::random().expect("getrandom");
+        let b = SessionKey::random().expect("getrandom");
+        assert_eq!(SessionKey::from_hex(&a.to_hex()), Some(a));
+        assert_ne!(a, b);
+        assert_ne!(a.token(0), b.token(0));
+        assert_ne!(a.token(0), a.token(1));
+        assert_eq!(SessionKey::from_hex("xyz"), None);
+    }
+}

@@ -47,7 +47,7 @@ impl Service for AgpIpc {
     type StaticStorage = static_storage::recommended::Ipc;
     type ConfigSerializer = serialize::recommended::Recommended;
     type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        dynamic_storage::recommended::PersistentIpc<T>;
+        crate::owner_only_storage::OwnerOnlyStorage<T>;
     type Bag = bag::recommended::Recommended;
     type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
         dynamic_storage::recommended::Ipc<T>;

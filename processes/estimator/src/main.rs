@@ -19,9 +19,9 @@ use std::time::{Duration, Instant};
 use agp_affordance::AffordanceGradient;
 use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
 use agp_shared_types::{
-    AgpIpc, GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent, LearnEventKind,
-    LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome, WaitStrategy,
-    Waiter, alloc_count, install_shutdown_handler, monotonic_ns, stage,
+    AgpIpc, EstimatorLearning, GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent,
+    LearnEventKind, LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome,
+    WaitStrategy, Waiter, alloc_count, install_shutdown_handler, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
@@ -90,7 +90,7 @@ fn run() -> Result<()> {
     let saved = args.results.join(format!("{}.ag", scenario.name));
     let load = match (&args.load, args.reuse) {
         (Some(path), _) => Some(path.clone()),
-        (None, true) if saved.is_file() => Some(saved),
+        (None, true) if saved.is_file() => Some(saved.clone()),
         (None, true) => {
             println!(
                 "agp-estimator: no AG file at {}: learning `{}` from the planner's trials",
@@ -101,9 +101,13 @@ fn run() -> Result<()> {
         }
         (None, false) => None,
     };
+    if load.is_none() {
+        // Learning ends by saving there: find out now, not after the whole protocol.
+        check_ag_destination(&saved)?;
+    }
     let mut estimator = Estimator::open(&instance, &scenario, load.is_some(), &args)?;
     if let Some(path) = &load {
-        let gradient = AffordanceGradient::load(path)
+        let gradient = AffordanceGradient::load_for(path, &scenario.name)
             .with_context(|| format!("cannot load the AG file {}", path.display()))?;
         estimator.publish(&gradient)?;
         estimator.report(LearnReport {
@@ -157,6 +161,12 @@ fn run() -> Result<()> {
         if let Some(gradient) = estimator.state.finished.take() {
             estimator.finish(&gradient)?;
         }
+        if let Some(failed) = estimator.save_failed.take() {
+            // The planner has the `Learned` report saying so; give it a moment to read it
+            // before this process (and its publishers) goes.
+            std::thread::sleep(Duration::from_millis(200));
+            return Err(failed);
+        }
     }
 }
 
@@ -170,6 +180,8 @@ struct Estimator {
     grids_seq: u64,
     results: PathBuf,
     object: String,
+    /// Set when the AG file could not be saved: the process ends with this error.
+    save_failed: Option<anyhow::Error>,
 }
 
 /// What the main loop's poll works on.
@@ -189,6 +201,13 @@ struct State {
     /// Trials learned and rejected when the session ended.
     final_counts: (u32, u32),
     grids_seq: u64,
+    /// The planner's learning session the learning session holds (0: no event yet).
+    learn_session: u64,
+    /// When this estimator started (CLOCK_MONOTONIC, ns): carried by every estimate, so a
+    /// planner sees a restarted estimator.
+    start_ns: u64,
+    /// The scenario learned, for a session started over.
+    scenario: Scenario,
 }
 
 fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -263,6 +282,9 @@ impl Estimator {
             finished: None,
             final_counts: (0, 0),
             grids_seq: 0,
+            learn_session: 0,
+            start_ns: monotonic_ns(),
+            scenario: scenario.clone(),
         };
         // Frames and learn events notify the same event service.
         let listener = frames
@@ -286,6 +308,7 @@ impl Estimator {
             grids_seq: 0,
             results: args.results.clone(),
             object: scenario.name.clone(),
+            save_failed: None,
             _node: node,
         })
     }
@@ -351,9 +374,6 @@ impl Estimator {
         self.publish(gradient)?;
         let path = self.results.join(format!("{}.ag", self.object));
         let saved = save(gradient, &path);
-        if let Err(e) = &saved {
-            eprintln!("agp-estimator: {e:#}");
-        }
         let (learned, rejected) = self.state.counts();
         self.report(LearnReport {
             kind: LearnReportKind::Learned as u32,
@@ -385,7 +405,44 @@ impl Estimator {
                     .map_or("none".into(), |r| format!("{r:.2} deg"))
             );
         }
+        self.save_failed = saved.err();
         Ok(())
+    }
+}
+
+/// Fails when learning could not end by saving the AG file at `path`: a directory (or
+/// anything but a regular file) in its place, or a results folder that cannot be created or
+/// written. Learning takes minutes; this takes a moment.
+fn check_ag_destination(path: &Path) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        bail!(
+            "the AG file {} is a directory or a special file, not a file: learning could not save there; move it away",
+            path.display()
+        );
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the results folder {}", dir.display()))?;
+    let probe = dir.join(format!(".agp-estimator-probe-{}", std::process::id()));
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(anyhow!(
+            "cannot write in the results folder {}: {e}; learning could not save the AG file {}",
+            dir.display(),
+            path.display()
+        )),
     }
 }
 
@@ -470,9 +527,16 @@ impl State {
 
     /// The frame's estimate: no pose during learning, the frame's trace and publish stamp.
     fn acknowledge(&mut self, frame: &IrFrame, received_ns: u64) -> Result<()> {
+        let learning = match (&self.session, self.learn_session) {
+            (None, _) => EstimatorLearning::No,
+            (Some(_), 0) => EstimatorLearning::Waiting,
+            (Some(_), _) => EstimatorLearning::UnderWay,
+        };
         let mut e = ObjectEstimate {
             step: frame.step,
             grids_seq: self.grids_seq,
+            learning: learning as u8,
+            estimator_start_ns: self.start_ns,
             ..ObjectEstimate::default()
         };
         e.timing.trace_id = frame.timing.trace_id;
@@ -529,8 +593,26 @@ impl State {
             eprintln!("agp-estimator: unknown learn event kind {}", event.kind);
             return Ok(());
         };
+        if self.session.is_none() || kind as u32 > LearnEventKind::LearningDone as u32 {
+            // Learning is over (or the gradients came from a file), or not a step of the
+            // learning protocol.
+            return Ok(());
+        }
+        if event.session != self.learn_session {
+            if self.learn_session != 0 {
+                // Another run of the protocol: its planner restarted. Everything learned
+                // from the previous one (a half-done trial included) goes, so no trial is
+                // counted twice.
+                let (learned, rejected) = self.counts();
+                println!(
+                    "agp-estimator: a new learning session from the planner: the {} trial(s) of the previous one are dropped and learning starts over",
+                    learned + rejected
+                );
+                self.session = Some(session(&self.scenario)?);
+            }
+            self.learn_session = event.session;
+        }
         let Some(session) = &mut self.session else {
-            // Learning is over (or the gradients came from a file).
             return Ok(());
         };
         self.trials_total = self.trials_total.max(event.total);

@@ -5,18 +5,21 @@ use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
 use agp_shared_types::{
-    ActiveEpoch, AgpIpc, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, TimingHeader,
-    WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler, monotonic_ns,
-    shutdown_requested, stage,
+    ActiveEpoch, AgpIpc, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, SessionKey,
+    TimingHeader, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
+    monotonic_ns, shutdown_requested, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
+use iceoryx2::identifiers::{UniqueNodeId, UniquePublisherId};
+use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::{CallbackProgression, Node, NodeState, PortFactory};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Clock {
@@ -83,6 +86,7 @@ fn run() -> Result<()> {
         );
     }
     install_shutdown_handler();
+    let key = SessionKey::from_env().map_err(|e| anyhow::anyhow!(e))?;
     let scenario = Scenario::resolve(&args.scenario)?;
     let robot = RobotDescription::epuck();
     let config = SimConfig {
@@ -107,6 +111,7 @@ fn run() -> Result<()> {
 
     let mut runner = Runner {
         sim,
+        gate: Gate::new(key, &instance),
         ports,
         reset_seq: 0,
         active_epoch: 0,
@@ -114,10 +119,12 @@ fn run() -> Result<()> {
         rate_hz: args.rate_hz,
         step_log,
     };
-    match args.clock {
+    let result = match args.clock {
         Clock::Lockstep => runner.lockstep(&waiter, args.idle_timeout_s),
         Clock::Realtime => runner.realtime(&waiter, Duration::from_millis(args.watchdog_ms)),
-    }
+    };
+    runner.gate.summary();
+    result
 }
 
 struct Ports {
@@ -128,6 +135,11 @@ struct Ports {
     commands: Subscriber<AgpIpc, MotorCommand, ()>,
     resets: Subscriber<AgpIpc, Reset, ()>,
     epochs: Subscriber<AgpIpc, ActiveEpoch, ()>,
+    /// The services of commands and resets, to name the node of a stranger's publisher.
+    commands_service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<AgpIpc, MotorCommand, ()>,
+    resets_service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<AgpIpc, Reset, ()>,
 }
 
 fn port_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -186,8 +198,139 @@ impl Ports {
                 .subscriber_builder()
                 .create()
                 .map_err(port_err("active epoch subscriber"))?,
+            commands_service: commands.data,
+            resets_service: resets.data,
         };
         Ok((ports, inbox))
+    }
+}
+
+/// Most strangers named one by one on stderr; later ones are only counted.
+const MAX_STRANGERS: usize = 16;
+
+/// Which commands physics applies: with the run's [`SessionKey`] (the supervisor hands it
+/// to physics alone), only those carrying the token of their epoch, that is from processes
+/// the supervisor started; without one (physics run by hand, the probe's and benchmarks'
+/// private pipelines), every command. Each stranger's publisher is named once on stderr.
+struct Gate {
+    key: Option<SessionKey>,
+    /// The token of the last epoch asked about.
+    cached: (u64, u64),
+    dropped: u64,
+    /// Publishers seen sending without the token (at most [`MAX_STRANGERS`], room kept).
+    strangers: Vec<(UniquePublisherId, &'static str)>,
+    /// How many of `strangers` are not yet named on stderr.
+    unnamed: usize,
+    config: iceoryx2::config::Config,
+}
+
+impl Gate {
+    fn new(key: Option<SessionKey>, instance: &Instance) -> Self {
+        Self {
+            cached: (0, key.map_or(0, |k| k.token(0))),
+            key,
+            dropped: 0,
+            strangers: Vec::with_capacity(MAX_STRANGERS),
+            unnamed: 0,
+            config: instance.config().clone(),
+        }
+    }
+
+    /// Whether a command or reset (`what`) of `epoch` carrying `token`, sent by
+    /// `publisher`, may be applied. Allocates nothing.
+    fn admits(
+        &mut self,
+        epoch: u64,
+        token: u64,
+        publisher: UniquePublisherId,
+        what: &'static str,
+    ) -> bool {
+        let Some(key) = &self.key else {
+            return true;
+        };
+        if self.cached.0 != epoch {
+            self.cached = (epoch, key.token(epoch));
+        }
+        if token == self.cached.1 {
+            return true;
+        }
+        self.dropped += 1;
+        if self.strangers.len() < MAX_STRANGERS
+            && !self.strangers.iter().any(|(p, _)| *p == publisher)
+        {
+            self.strangers.push((publisher, what));
+            self.unnamed += 1;
+        }
+        false
+    }
+
+    /// Names on stderr each stranger not named yet: its node, process and executable.
+    fn name_strangers(&mut self, ports: &Ports) {
+        if self.unnamed == 0 {
+            return;
+        }
+        let first = self.strangers.len() - self.unnamed;
+        self.unnamed = 0;
+        for &(publisher, what) in &self.strangers[first..] {
+            let mut node_id = None;
+            let find =
+                |d: &iceoryx2::service::dynamic_config::publish_subscribe::PublisherDetails| {
+                    if d.publisher_id == publisher {
+                        node_id = Some(d.node_id);
+                        CallbackProgression::Stop
+                    } else {
+                        CallbackProgression::Continue
+                    }
+                };
+            if what == "reset" {
+                ports.resets_service.dynamic_config().list_publishers(find);
+            } else {
+                ports
+                    .commands_service
+                    .dynamic_config()
+                    .list_publishers(find);
+            }
+            eprintln!(
+                "agp-physics: refused a {what} from {}: not a process this instance's supervisor started (no token of its epoch); its commands and resets are dropped",
+                node_id.map_or_else(
+                    || "a publisher that has gone".to_owned(),
+                    |id| self.describe(id)
+                )
+            );
+        }
+    }
+
+    /// `node `NAME` of pid N (`EXECUTABLE`)`, or the node id when it cannot be listed.
+    fn describe(&self, id: UniqueNodeId) -> String {
+        let mut found = None;
+        let _ = Node::<AgpIpc>::list(&self.config, |state| {
+            if let NodeState::Alive(view) = &state
+                && *view.id() == id
+            {
+                found = view.details().as_ref().map(|d| {
+                    format!(
+                        "node `{}` of pid {} (`{}`)",
+                        d.name(),
+                        d.process_id(),
+                        d.executable()
+                    )
+                });
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        });
+        found.unwrap_or_else(|| format!("node {id}"))
+    }
+
+    /// At exit: how many commands and resets were refused, if any.
+    fn summary(&self) {
+        if self.dropped > 0 {
+            eprintln!(
+                "agp-physics: refused {} motor command(s) and reset(s) of {} process(es) the supervisor did not start",
+                self.dropped,
+                self.strangers.len()
+            );
+        }
     }
 }
 
@@ -219,6 +362,7 @@ fn latest_epoch(epochs: &Subscriber<AgpIpc, ActiveEpoch, ()>, current: u64) -> u
 
 struct Runner {
     sim: Sim,
+    gate: Gate,
     ports: Ports,
     reset_seq: u64,
     active_epoch: u64,
@@ -302,6 +446,12 @@ impl Runner {
         }
         .map_err(|e| anyhow::anyhow!("cannot receive a reset: {e:?}"))?
         {
+            if !self
+                .gate
+                .admits(r.epoch, r.token, r.header().publisher_id(), "reset")
+            {
+                continue;
+            }
             if r.epoch > self.active_epoch {
                 // A planner sends nothing before it saw its epoch active, so the epoch's
                 // sample is already here: read it before judging the reset.
@@ -313,6 +463,7 @@ impl Runner {
                 last = Some(*r);
             }
         }
+        self.gate.name_strangers(&self.ports);
         if let Some(r) = last {
             let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
             self.sim.reset(pose(r.object), pose(r.robot));
@@ -346,6 +497,7 @@ impl Runner {
                 let commands = &self.ports.commands;
                 let resets = &self.ports.resets;
                 let epochs = &self.ports.epochs;
+                let gate = &mut self.gate;
                 let ahead = &mut ahead;
                 // Every call in the wait is iceoryx2's (polls and the block); the closure
                 // itself only compares and copies.
@@ -356,6 +508,14 @@ impl Runner {
                         return Some(None);
                     }
                     while let Ok(Some(c)) = commands.receive() {
+                        if !gate.admits(
+                            c.epoch,
+                            c.token,
+                            c.header().publisher_id(),
+                            "motor command",
+                        ) {
+                            continue;
+                        }
                         if c.step != step {
                             // A command of another step: stale. Dropped.
                             continue;
@@ -388,6 +548,7 @@ impl Runner {
                 })
             };
             self.active_epoch = epoch;
+            self.gate.name_strangers(&self.ports);
             match outcome {
                 WaitOutcome::Shutdown => return Ok(()),
                 WaitOutcome::TimedOut => {
@@ -455,6 +616,12 @@ impl Runner {
                 .receive()
                 .map_err(|e| anyhow::anyhow!("cannot receive a command: {e:?}"))?
             {
+                if !self
+                    .gate
+                    .admits(c.epoch, c.token, c.header().publisher_id(), "motor command")
+                {
+                    continue;
+                }
                 if c.epoch > self.active_epoch {
                     self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
                 }
@@ -464,6 +631,7 @@ impl Runner {
                     cause = received(&c);
                 }
             }
+            self.gate.name_strangers(&self.ports);
             if last_command.elapsed() > watchdog {
                 // Stale commands: stop, as the robot's firmware would.
                 wheels = (0.0, 0.0);

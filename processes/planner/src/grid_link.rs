@@ -1,10 +1,12 @@
 //! The planner's subscription to the estimator's gradient grids: the affordance gradient rebuilt from the newest complete set.
 
-use std::time::Duration;
+use std::path::Path;
+use std::time::{Duration, Instant};
 
 use agp_affordance::{AffordanceGradient, GridSetAssembler};
 use agp_shared_types::{
-    AgpIpc, DriveError, GradientGrid, Instance, WaitOutcome, WaitStrategy, Waiter,
+    AgpIpc, DriveError, EstimatorLearning, GradientGrid, Instance, ObjectEstimate, WaitOutcome,
+    WaitStrategy, Waiter,
 };
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::port::subscriber::Subscriber;
@@ -23,6 +25,9 @@ use iceoryx2::prelude::Node;
 /// publications, oldest first, so it ends on the newest set as well.
 pub struct GridLink {
     subscriber: Subscriber<AgpIpc, GradientGrid, ()>,
+    /// The estimator's estimates: the latest says whether it waits for a planner to drive
+    /// its learning (then no grid will come unless one does).
+    estimates: Subscriber<AgpIpc, ObjectEstimate, ()>,
     /// Woken by the estimator once per published set.
     waiter: Waiter,
     set: GridSetAssembler,
@@ -50,8 +55,16 @@ impl GridLink {
             .listener_builder()
             .create()
             .map_err(open_err("the grid listener"))?;
+        let estimates = instance
+            .estimates(&node)
+            .map_err(open_err("the estimates"))?
+            .data
+            .subscriber_builder()
+            .create()
+            .map_err(open_err("the estimate subscriber"))?;
         Ok(Self {
             subscriber,
+            estimates,
             waiter: Waiter::new(listener, WaitStrategy::Block),
             set: GridSetAssembler::new(),
             _node: node,
@@ -63,23 +76,60 @@ impl GridLink {
     /// before deciding, so the set is the newest one present; a set a previous call
     /// returned is not returned again.
     ///
-    /// Fails on shutdown ([`DriveError::Shutdown`]), at the deadline, or when a grid is
-    /// refused (the set under way is then dropped).
+    /// Says once on stdout what it waits for when the grids are not there at once. Fails
+    /// on shutdown ([`DriveError::Shutdown`]), at the deadline, when a grid is refused (the
+    /// set under way is then dropped), and with [`EstimatorWaitsToLearn`] when the
+    /// estimator has no gradients and waits for a planner to learn them (`ag_file`, where
+    /// the estimator looks for them, is named in that error).
     pub fn wait_gradient(
         &mut self,
         object_name: &str,
         timeout: Duration,
+        ag_file: &Path,
     ) -> Result<AffordanceGradient> {
         let Self {
             subscriber,
+            estimates,
             waiter,
             set,
             ..
         } = self;
-        let outcome = waiter.wait_for(timeout, || match drain(subscriber, set) {
-            Ok(()) => set.is_complete().then_some(Ok(())),
-            Err(e) => Some(Err(e)),
-        });
+        drain(subscriber, set)?;
+        if !set.is_complete() {
+            println!(
+                "planner: waiting up to {} s for the estimator's gradient grids of `{object_name}` (it loads them from an AG file such as {}, or learns them from a learning planner)",
+                timeout.as_secs(),
+                ag_file.display()
+            );
+        }
+        let start = Instant::now();
+        let mut waiting_to_learn = false;
+        let outcome = loop {
+            let left = timeout.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                break WaitOutcome::TimedOut;
+            }
+            let outcome =
+                waiter.wait_for(left.min(ESTIMATOR_LOOK), || match drain(subscriber, set) {
+                    Ok(()) => set.is_complete().then_some(Ok(())),
+                    Err(e) => Some(Err(e)),
+                });
+            if !matches!(outcome, WaitOutcome::TimedOut) {
+                break outcome;
+            }
+            while let Ok(Some(e)) = estimates.receive() {
+                waiting_to_learn =
+                    EstimatorLearning::from_u8(e.learning) == Some(EstimatorLearning::Waiting);
+            }
+            if waiting_to_learn {
+                return Err(EstimatorWaitsToLearn {
+                    object: object_name.to_owned(),
+                    ag_file: ag_file.to_owned(),
+                    file_exists: ag_file.is_file(),
+                }
+                .into());
+            }
+        };
         match outcome {
             WaitOutcome::Ready(r) => r?,
             WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
@@ -112,6 +162,41 @@ impl GridLink {
         Ok(self.set.is_complete())
     }
 }
+
+/// How often a wait for the grids looks at the estimator's latest estimate.
+const ESTIMATOR_LOOK: Duration = Duration::from_millis(50);
+
+/// The estimator has no gradients to serve and waits for a planner to drive its learning,
+/// which a planner of a task does not do (without `--learn-if-missing`).
+#[derive(Debug)]
+pub struct EstimatorWaitsToLearn {
+    object: String,
+    ag_file: std::path::PathBuf,
+    file_exists: bool,
+}
+
+impl std::fmt::Display for EstimatorWaitsToLearn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.file_exists {
+            write!(
+                f,
+                "the estimator waits to learn `{}` instead of serving the AG file {}: run it with `--reuse` or `--load {}`",
+                self.object,
+                self.ag_file.display(),
+                self.ag_file.display()
+            )
+        } else {
+            write!(
+                f,
+                "no AG file at {} and the estimator waits for a planner to learn `{}`: learn it first with `--learn-if-missing` on this planner (the estimator run with `--reuse`) or `agp bench learn`",
+                self.ag_file.display(),
+                self.object
+            )
+        }
+    }
+}
+
+impl std::error::Error for EstimatorWaitsToLearn {}
 
 /// Feeds every grid that arrived into `set`, each read in place and released at once; a
 /// grid of another seq drops the set under way and starts its own.

@@ -110,6 +110,38 @@ struct EstimatorLink {
     learned: u32,
     rejected: u32,
     timeout: Duration,
+    /// Start time of the estimator that acknowledges (from its estimates; 0: none seen).
+    estimator_start_ns: u64,
+    /// Set when an estimate came from an estimator started after that one.
+    estimator_restarted: bool,
+}
+
+/// The estimator restarted: it lost what it learned, so the protocol starts over (a new
+/// session) rather than waiting for acknowledgements or reports it will never send.
+#[derive(Debug)]
+struct EstimatorRestarted;
+
+impl std::fmt::Display for EstimatorRestarted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("the estimator restarted")
+    }
+}
+
+impl std::error::Error for EstimatorRestarted {}
+
+/// How long a wait for a report lasts before it looks again for a restarted estimator.
+const REPORT_WAIT_SLICE: Duration = Duration::from_millis(20);
+
+/// What [`take_estimates`] keeps track of.
+#[derive(Debug, Clone, Copy)]
+struct Acks {
+    /// Publish stamp of the newest frame acknowledged.
+    stamp: u64,
+    /// That frame's estimate and its receipt, until taken.
+    latest: Option<(ObjectEstimate, u64)>,
+    /// The acknowledging estimator's start time, and whether a later one appeared.
+    estimator_start_ns: u64,
+    restarted: bool,
 }
 
 fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -174,6 +206,8 @@ impl EstimatorLink {
             learned: 0,
             rejected: 0,
             timeout,
+            estimator_start_ns: 0,
+            estimator_restarted: false,
             _node: node,
         })
     }
@@ -186,12 +220,13 @@ impl EstimatorLink {
         let stamp = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
         if self.acked_stamp < stamp {
             let estimates = &self.estimates;
-            let (mut acked, mut latest) = (self.acked_stamp, self.latest);
+            let mut acks = self.acks();
             let outcome = self.estimates_waiter.wait_for(self.timeout, || {
-                take_estimates(estimates, &mut acked, &mut latest);
-                (acked >= stamp).then_some(())
+                take_estimates(estimates, &mut acks);
+                (acks.stamp >= stamp || acks.restarted).then_some(())
             });
-            (self.acked_stamp, self.latest) = (acked, latest);
+            self.set_acks(acks);
+            self.check_estimator()?;
             match outcome {
                 WaitOutcome::Ready(()) => {}
                 WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
@@ -201,6 +236,30 @@ impl EstimatorLink {
         Ok(self
             .latest
             .take_if(|(e, _)| e.timing.stamps_ns[stage::FRAME_PUBLISHED] == stamp))
+    }
+
+    fn acks(&self) -> Acks {
+        Acks {
+            stamp: self.acked_stamp,
+            latest: self.latest,
+            estimator_start_ns: self.estimator_start_ns,
+            restarted: self.estimator_restarted,
+        }
+    }
+
+    fn set_acks(&mut self, a: Acks) {
+        self.acked_stamp = a.stamp;
+        self.latest = a.latest;
+        self.estimator_start_ns = a.estimator_start_ns;
+        self.estimator_restarted = a.restarted;
+    }
+
+    /// [`EstimatorRestarted`] once when an estimate showed a restarted estimator.
+    fn check_estimator(&mut self) -> Result<()> {
+        if std::mem::take(&mut self.estimator_restarted) {
+            return Err(EstimatorRestarted.into());
+        }
+        Ok(())
     }
 
     fn no_ack(&self, step: u64) -> anyhow::Error {
@@ -255,11 +314,17 @@ impl EstimatorLink {
         found
     }
 
-    /// Waits up to `timeout` for a report of one of `kinds`.
+    /// Waits up to `timeout` for a report of one of `kinds`. Ends with
+    /// [`EstimatorRestarted`] when a restarted estimator acknowledges a frame meanwhile (it
+    /// would never send the report).
     fn wait_report(&mut self, kinds: &[LearnReportKind], timeout: Duration) -> Result<LearnReport> {
         let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let start = std::time::Instant::now();
         loop {
+            let mut acks = self.acks();
+            take_estimates(&self.estimates, &mut acks);
+            self.set_acks(acks);
+            self.check_estimator()?;
             let mut found = None;
             for &k in kinds {
                 if found.is_none() {
@@ -270,32 +335,39 @@ impl EstimatorLink {
                 return Ok(r);
             }
             let left = timeout.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                bail!("no {kinds:?} report from the estimator within {timeout:?}");
+            }
             let reports = &self.reports;
-            match self.reports_waiter.wait_for(left, || {
-                reports.has_samples().unwrap_or(false).then_some(())
-            }) {
-                WaitOutcome::Ready(()) => {}
+            match self
+                .reports_waiter
+                .wait_for(left.min(REPORT_WAIT_SLICE), || {
+                    reports.has_samples().unwrap_or(false).then_some(())
+                }) {
+                WaitOutcome::Ready(()) | WaitOutcome::TimedOut => {}
                 WaitOutcome::Shutdown => return Err(DriveError::Shutdown.into()),
-                WaitOutcome::TimedOut => {
-                    bail!("no {kinds:?} report from the estimator within {timeout:?}")
-                }
             }
         }
     }
 }
 
-/// Takes the estimates that arrived: raises `acked` to the newest acknowledged publish
-/// stamp and keeps that frame's estimate, with its receipt, in `latest`.
-fn take_estimates(
-    estimates: &Subscriber<AgpIpc, ObjectEstimate, ()>,
-    acked: &mut u64,
-    latest: &mut Option<(ObjectEstimate, u64)>,
-) {
+/// Takes the estimates that arrived: raises the acknowledged stamp to the newest one and
+/// keeps that frame's estimate, with its receipt. An estimate of an estimator started
+/// later than the one known marks a restart; one of an estimator started earlier (left in
+/// the queue by one that died) is ignored.
+fn take_estimates(estimates: &Subscriber<AgpIpc, ObjectEstimate, ()>, acks: &mut Acks) {
     while let Ok(Some(e)) = estimates.receive() {
+        if e.estimator_start_ns < acks.estimator_start_ns {
+            continue;
+        }
+        if e.estimator_start_ns > acks.estimator_start_ns {
+            acks.restarted |= acks.estimator_start_ns != 0;
+            acks.estimator_start_ns = e.estimator_start_ns;
+        }
         let published = e.timing.stamps_ns[stage::FRAME_PUBLISHED];
-        if published > *acked {
-            *acked = published;
-            *latest = Some((*e, monotonic_ns()));
+        if published > acks.stamp {
+            acks.stamp = published;
+            acks.latest = Some((*e, monotonic_ns()));
         }
     }
 }
@@ -312,6 +384,8 @@ struct Learner<'a> {
     object0: Pose2,
     radius: f64,
     total: u32,
+    /// The run of the protocol under way ([`LearnEvent::session`]).
+    session: u64,
 }
 
 /// How one trial went, as the planner saw it.
@@ -361,10 +435,13 @@ impl Learner<'_> {
         let driver = &mut self.driver;
         let link = &mut self.link;
         let estimates = &link.estimates;
-        let (mut acked, mut latest) = (link.acked_stamp, link.latest);
+        let mut acks = link.acks();
         let mut taken = None;
         let outcome = link.estimates_waiter.wait_for(link.timeout, || {
-            take_estimates(estimates, &mut acked, &mut latest);
+            take_estimates(estimates, &mut acks);
+            if acks.restarted {
+                return Some(Ok(()));
+            }
             if taken.is_none() {
                 match driver.take_frame() {
                     Ok(Some(f)) => taken = Some(f.timing.stamps_ns[stage::FRAME_PUBLISHED]),
@@ -373,9 +450,10 @@ impl Learner<'_> {
                 }
             }
             // Acknowledged: the frame taken, or (not yet taken) one newer than `before`.
-            (acked >= taken.unwrap_or(before + 1)).then_some(Ok(()))
+            (acks.stamp >= taken.unwrap_or(before + 1)).then_some(Ok(()))
         });
-        (link.acked_stamp, link.latest) = (acked, latest);
+        link.set_acks(acks);
+        link.check_estimator()?;
         match outcome {
             WaitOutcome::Ready(Ok(())) => {}
             WaitOutcome::Ready(Err(e)) => return Err(e.into()),
@@ -409,6 +487,7 @@ impl Learner<'_> {
     fn event(&self, kind: LearnEventKind) -> LearnEvent {
         LearnEvent {
             kind: kind as u32,
+            session: self.session,
             total: self.total,
             object: self.object0,
             ..LearnEvent::default()
@@ -508,6 +587,16 @@ fn restarted(e: &anyhow::Error) -> bool {
     matches!(e.downcast_ref(), Some(DriveError::PhysicsRestarted))
 }
 
+/// Whether `e` means the estimator restarted (the protocol starts over).
+fn estimator_restarted(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<EstimatorRestarted>().is_some()
+}
+
+/// A new session id: unique per run of the protocol, never 0.
+fn new_session() -> u64 {
+    (monotonic_ns() ^ (u64::from(std::process::id()) << 40)).max(1)
+}
+
 /// Whether `e` means a shutdown was asked for (the planner stops quietly).
 fn shutdown(e: &anyhow::Error) -> bool {
     matches!(e.downcast_ref(), Some(DriveError::Shutdown))
@@ -548,6 +637,7 @@ pub fn run(
         settings,
         object0: Pose2::new(o.x, o.y, o.theta),
         total,
+        session: 0,
     };
     match learn(&mut learner, scenario) {
         Err(e) if shutdown(&e) => Ok(()),
@@ -567,6 +657,22 @@ fn learn(learner: &mut Learner<'_>, scenario: &Scenario) -> Result<()> {
         ALPHAS_DEG,
         (settings.push.push_duration * 1e3).round()
     );
+    loop {
+        // Each run of the protocol is a session of its own: an estimator that still holds
+        // trials of an earlier one (this planner restarted) drops them.
+        learner.session = new_session();
+        match protocol(learner, wall) {
+            Err(e) if estimator_restarted(&e) => {
+                println!("  the estimator restarted: learning starts over");
+            }
+            other => return other,
+        }
+    }
+}
+
+/// One run of the protocol, from the shape circling to the estimator's `Learned` report.
+fn protocol(learner: &mut Learner<'_>, wall: std::time::Instant) -> Result<()> {
+    let settings = learner.settings;
     let closed = loop {
         match learner.shape() {
             Ok(c) => break c,

@@ -240,6 +240,7 @@ fn run() -> Result<()> {
                 epoch: args.epoch,
                 timeout: TIMEOUT,
                 gradient_timeout: Duration::from_secs(120),
+                ag_file,
                 trace: args.trace,
             };
             let result = task_mode::run(&instance, &scenario, &settings)?;

@@ -45,6 +45,8 @@ pub struct TaskSettings {
     pub timeout: Duration,
     /// How long the estimator may take to publish the gradients (it may be learning).
     pub gradient_timeout: Duration,
+    /// Where the estimator looks for the AG file (`<results>/<object>.ag`), for messages.
+    pub ag_file: std::path::PathBuf,
     /// Print every estimate and push.
     pub trace: bool,
 }
@@ -132,12 +134,13 @@ pub fn run(
     let robot = RobotDescription::epuck();
     let gradient = if settings.planner.needs_gradient() {
         let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
-        match link.wait_gradient(&scenario.name, settings.gradient_timeout) {
+        match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
             Ok(g) => Some(g),
             Err(e) if agp_shared_types::shutdown_requested() => {
                 let _ = e;
                 return Ok(None);
             }
+            Err(e) if e.is::<crate::grid_link::EstimatorWaitsToLearn>() => return Err(e),
             Err(e) => return Err(e).context("no affordance gradient from the estimator"),
         }
     } else {

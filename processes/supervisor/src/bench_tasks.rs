@@ -224,7 +224,7 @@ impl<'a> Runner<'a> {
         if in_process {
             let ag = ag
                 .map(|p| {
-                    AffordanceGradient::load(p).with_context(|| {
+                    AffordanceGradient::load_for(p, &scenario.name).with_context(|| {
                         format!("cannot load the affordance gradient `{}`", p.display())
                     })
                 })

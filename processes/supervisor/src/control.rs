@@ -1,7 +1,7 @@
 //! The client side of the control service: `agp status`, `agp down` and the wait of
 //! `agp up --detach`, talking to the running supervisor through iceoryx2.
 
-use std::fs::{File, TryLockError};
+use std::fs::TryLockError;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -17,6 +17,10 @@ use crate::instance_lock::InstanceLock;
 /// How long a client waits for the supervisor's answer (a safety net: it answers within
 /// its 10 ms poll).
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long the children of a dead supervisor may take to die before `agp down` names
+/// them and refuses to clean.
+const DEAD_CHILDREN_WAIT: Duration = Duration::from_secs(3);
 
 /// The instance a command addresses: `--instance`, else the launch file's.
 pub fn instance_name(instance: Option<&str>, launch: &Path) -> Result<String> {
@@ -40,8 +44,11 @@ pub fn instance_name(instance: Option<&str>, launch: &Path) -> Result<String> {
 }
 
 /// Whether a supervisor holds the instance's lock (it is up, or starting, or stopping).
+///
+/// The lock is opened as the supervisor opens it: not through a link, only a regular file
+/// of this user; anything else is no supervisor's.
 pub fn is_up(instance: &Instance) -> bool {
-    let Ok(file) = File::open(InstanceLock::path_of(instance)) else {
+    let Ok(file) = crate::instance_lock::open_lock(&InstanceLock::path_of(instance), false) else {
         return false;
     };
     match file.try_lock_shared() {
@@ -94,6 +101,15 @@ pub struct ProcessReport {
     pub rate_topic: Option<String>,
 }
 
+/// A live node of the instance its supervisor did not start (`agp status --json`).
+#[derive(Debug, Serialize)]
+pub struct StrangerReport {
+    /// The node's name (empty if it has none).
+    pub node: String,
+    /// The process the node declares (0: unknown).
+    pub pid: u32,
+}
+
 /// `agp status --json`.
 #[derive(Debug, Serialize)]
 pub struct StatusReport {
@@ -105,6 +121,12 @@ pub struct StatusReport {
     /// How the processes wait for messages (`AGP_WAIT`), or `mixed`.
     pub waiting: String,
     pub processes: Vec<ProcessReport>,
+    /// Processes paused now by `agp profile`'s pause lease, and the seconds it has left.
+    pub paused: u32,
+    pub pause_left_s: f64,
+    /// Live nodes of the instance that are neither the supervisor's, nor its processes',
+    /// nor a client's: processes that joined the instance on their own.
+    pub strangers: Vec<StrangerReport>,
 }
 
 impl StatusReport {
@@ -128,6 +150,15 @@ impl StatusReport {
                     epoch: p.epoch,
                     rate_per_s: (p.rate_topic[0] != 0).then_some(p.rate_mhz as f64 * 1e-3),
                     rate_topic: (p.rate_topic[0] != 0).then(|| read_str(&p.rate_topic)),
+                })
+                .collect(),
+            paused: r.paused,
+            pause_left_s: r.pause_left_ms as f64 * 1e-3,
+            strangers: r.strangers[..(r.stranger_count as usize).min(r.strangers.len())]
+                .iter()
+                .map(|s| StrangerReport {
+                    node: read_str(&s.name),
+                    pid: s.pid,
                 })
                 .collect(),
         }
@@ -171,13 +202,45 @@ impl StatusReport {
                 p.exec
             );
         }
+        if self.paused > 0 {
+            println!(
+                "  paused: {} process(es) by `agp profile` for {:.1} s more",
+                self.paused, self.pause_left_s
+            );
+        }
+        for s in &self.strangers {
+            println!(
+                "  stranger: node `{}` of pid {} joined the instance; the supervisor did not start it",
+                s.node,
+                if s.pid == 0 {
+                    "?".to_owned()
+                } else {
+                    s.pid.to_string()
+                }
+            );
+        }
     }
 }
 
+/// What `agp down` did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DownOutcome {
+    /// The supervisor stopped its processes and removed the instance's files.
+    Stopped,
+    /// No supervisor held the instance (it died, `kill -9`), and nothing of it was alive:
+    /// `removed` leftover files went.
+    Cleaned { removed: usize },
+}
+
 /// `agp down`: asks the supervisor to stop, then waits until it has let go of the instance
-/// (every process stopped, every file removed).
-pub fn down(name: &str, timeout: Duration) -> Result<()> {
+/// (every process stopped, every file removed). With no supervisor but files left (its
+/// supervisor died), removes them, unless a process of the instance still lives: then it
+/// names them and refuses.
+pub fn down(name: &str, timeout: Duration) -> Result<DownOutcome> {
     let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    if !is_up(&instance) && !instance.files().is_empty() {
+        return clean_dead(&instance);
+    }
     let r = ask(name, ControlKind::Down)?;
     if r.ok == 0 {
         bail!("the supervisor of instance `{name}` refused to stop");
@@ -192,5 +255,30 @@ pub fn down(name: &str, timeout: Duration) -> Result<()> {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    Ok(())
+    Ok(DownOutcome::Stopped)
+}
+
+/// Removes the files of an instance whose supervisor is gone, holding its lock meanwhile
+/// so no `agp up` starts on them, once no node of the instance is alive.
+fn clean_dead(instance: &Instance) -> Result<DownOutcome> {
+    let name = instance.name();
+    let lock = InstanceLock::acquire(instance)?;
+    // Children of a supervisor killed a moment ago are still being killed by the kernel.
+    let deadline = Instant::now() + DEAD_CHILDREN_WAIT;
+    let mut alive = crate::up::alive_nodes(instance);
+    while !alive.is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+        alive = crate::up::alive_nodes(instance);
+    }
+    if !alive.is_empty() {
+        bail!(
+            "instance `{name}` has no supervisor but live processes: {}; stop them first, then run `agp down` again",
+            alive.join(", ")
+        );
+    }
+    let removed = instance
+        .remove_files()
+        .with_context(|| format!("cannot remove the leftovers of instance `{name}`"))?;
+    drop(lock);
+    Ok(DownOutcome::Cleaned { removed })
 }

@@ -10,6 +10,12 @@
 //!
 //! A new process that exits or misses its deadline before step 4 is killed, the old epoch
 //! is published again, and the old process, which never stopped, drives on.
+//!
+//! It also holds the pause lease of `agp profile` ([`PauseLease`]): the pipeline's
+//! processes stay stopped until the lease's deadline, its release, the death of its holder
+//! or the end of the run, whichever comes first, so a profiler killed with SIGKILL cannot
+//! leave them stopped. And a status reply names the strangers: live nodes of the instance
+//! that are not the supervisor's, its processes' (or their descendants') or a client's.
 
 use std::path::PathBuf;
 use std::process::Child;
@@ -17,15 +23,17 @@ use std::time::{Duration, Instant};
 
 use agp_shared_types::{
     ActiveEpoch, AgpIpc, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
-    MAX_STATUS_PROCESSES, ProcessState, Topic, read_str, write_str,
+    MAX_PAUSE_LEASE, MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState, Topic, read_str,
+    write_str,
 };
 use anyhow::{Result, anyhow};
 use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::Node;
+use iceoryx2::prelude::{CallbackProgression, Node};
 
 use agp_supervisor::LaunchConfig;
 
@@ -67,6 +75,48 @@ struct Retiring {
     killed: bool,
 }
 
+/// A pause of the pipeline granted to one holder until a deadline.
+#[derive(Debug)]
+pub(crate) struct PauseLease {
+    /// The holder's process id.
+    pub(crate) holder: u32,
+    pub(crate) deadline: Instant,
+    /// The process groups (or lone processes, negative: groups) stopped for it.
+    pub(crate) stopped: Vec<libc::pid_t>,
+}
+
+impl PauseLease {
+    /// The deadline a request for `len` from `now` gets: at most [`MAX_PAUSE_LEASE`].
+    pub(crate) fn deadline_for(now: Instant, len: Duration) -> Instant {
+        now + len.min(MAX_PAUSE_LEASE)
+    }
+
+    /// Whether the lease is over at `now`: its deadline passed, or `holder_alive` says its
+    /// holder died.
+    pub(crate) fn is_over(&self, now: Instant, holder_alive: bool) -> bool {
+        now >= self.deadline || !holder_alive
+    }
+}
+
+/// Whether process `pid` exists (a zombie counts as gone only once reaped; a profiler's
+/// parent reaps it at once).
+fn process_alive(pid: u32) -> bool {
+    let Ok(pid) = libc::pid_t::try_from(pid) else {
+        return false;
+    };
+    // SAFETY: kill(2) with signal 0 only checks that the process exists.
+    let rc = unsafe { libc::kill(pid, 0) };
+    rc == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+}
+
+/// Sends `signal` to every target of `targets` (negative: a process group).
+fn signal_all(targets: &[libc::pid_t], signal: libc::c_int) {
+    for &t in targets {
+        // SAFETY: kill(2) of a process (group) this supervisor started.
+        unsafe { libc::kill(t, signal) };
+    }
+}
+
 /// The control service, the active epoch and the swaps of one run.
 pub(crate) struct ControlPlane {
     server: Server<AgpIpc, ControlRequest, (), ControlResponse, ()>,
@@ -83,6 +133,9 @@ pub(crate) struct ControlPlane {
     waiting: String,
     /// `None` when the streams could not be opened (then `agp status` shows no rates).
     rates: Option<MessageRates>,
+    /// The pause `agp profile` holds, if any.
+    pause: Option<PauseLease>,
+    instance: Instance,
 }
 
 fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -127,6 +180,8 @@ impl ControlPlane {
             swap: None,
             retiring: Vec::new(),
             waiting: waiting.to_owned(),
+            pause: None,
+            instance: instance.clone(),
             rates: match MessageRates::open(instance, node) {
                 Ok(r) => Some(r),
                 Err(e) => {
@@ -211,6 +266,14 @@ impl ControlPlane {
                     let result = self.on_driving(payload.epoch, payload.value_ns, slots, log);
                     self.answer(&request, slots, log, result.map(|()| 0));
                 }
+                Some(ControlKind::Pause) => {
+                    let result = self.on_pause(payload.pid, payload.value_ns, slots, log);
+                    self.answer(&request, slots, log, result.map(|()| 0));
+                }
+                Some(ControlKind::Resume) => {
+                    let result = self.on_resume(payload.pid, log);
+                    self.answer(&request, slots, log, result.map(|()| 0));
+                }
                 None => {
                     let why = format!("unknown request kind {}", payload.kind);
                     self.answer(&request, slots, log, Err(why));
@@ -240,6 +303,25 @@ impl ControlPlane {
         }
         write_str(&mut response.waiting, &self.waiting);
         fill_status(slots, self.rates.as_ref(), &mut response);
+        if let Some(p) = &self.pause {
+            response.paused = u32::try_from(p.stopped.len()).unwrap_or(u32::MAX);
+            response.pause_left_ms = u64::try_from(
+                p.deadline
+                    .saturating_duration_since(Instant::now())
+                    .as_millis(),
+            )
+            .unwrap_or(u64::MAX);
+        }
+        if ControlKind::from_u32(request.payload().kind) == Some(ControlKind::Status) {
+            let ours = self.pids(slots);
+            let found = strangers(&self.instance, &ours);
+            response.stranger_count =
+                u32::try_from(found.len().min(MAX_STATUS_STRANGERS)).unwrap_or(0);
+            for ((name, pid), out) in found.iter().zip(response.strangers.iter_mut()) {
+                out.pid = *pid;
+                write_str(&mut out.name, name);
+            }
+        }
         if let Err(e) = request.send_copy(response) {
             log.note(format_args!("control service: cannot answer: {e:?}"));
         }
@@ -366,8 +448,121 @@ impl ControlPlane {
         Ok(())
     }
 
-    /// Watches the swap under way and the retiring processes.
+    /// The processes this supervisor started and runs now: the launch file's, a swap's new
+    /// one, the retiring ones.
+    fn pids(&self, slots: &[Slot<'_>]) -> Vec<u32> {
+        let mut pids: Vec<u32> = slots
+            .iter()
+            .filter_map(|s| match &s.state {
+                SlotState::Running(child) => Some(child.id()),
+                _ => None,
+            })
+            .collect();
+        pids.extend(self.swap.as_ref().map(|s| s.child.id()));
+        pids.extend(self.retiring.iter().map(|r| r.child.id()));
+        pids
+    }
+
+    /// Grants (or renews, for its holder) the pause lease: stops every running process's
+    /// group until `len_ns` from now.
+    fn on_pause(
+        &mut self,
+        holder: u32,
+        len_ns: u64,
+        slots: &[Slot<'_>],
+        log: &Log,
+    ) -> Result<(), String> {
+        if holder == 0 || len_ns == 0 {
+            return Err("a pause needs its holder's pid and a length".to_owned());
+        }
+        let now = Instant::now();
+        let deadline = PauseLease::deadline_for(now, Duration::from_nanos(len_ns));
+        if let Some(p) = &mut self.pause {
+            if p.holder != holder {
+                return Err(format!(
+                    "the pipeline is already paused by pid {} for {:.1} s more",
+                    p.holder,
+                    p.deadline.saturating_duration_since(now).as_secs_f64()
+                ));
+            }
+            p.deadline = deadline;
+            return Ok(());
+        }
+        let mut stopped = Vec::new();
+        for slot in slots {
+            let SlotState::Running(child) = &slot.state else {
+                continue;
+            };
+            let Ok(pid) = libc::pid_t::try_from(child.id()) else {
+                continue;
+            };
+            // Each child leads a process group of its own: stop the group, or the process
+            // alone if it leads none.
+            for target in [-pid, pid] {
+                // SAFETY: kill(2) of a child of ours, not reaped yet.
+                if unsafe { libc::kill(target, libc::SIGSTOP) } == 0 {
+                    stopped.push(target);
+                    break;
+                }
+            }
+        }
+        log.note(format_args!(
+            "paused {} process{} for pid {holder} (lease of {:.1} s)",
+            stopped.len(),
+            if stopped.len() == 1 { "" } else { "es" },
+            deadline.saturating_duration_since(now).as_secs_f64()
+        ));
+        self.pause = Some(PauseLease {
+            holder,
+            deadline,
+            stopped,
+        });
+        Ok(())
+    }
+
+    /// Releases the pause lease of `holder`.
+    fn on_resume(&mut self, holder: u32, log: &Log) -> Result<(), String> {
+        match &self.pause {
+            Some(p) if p.holder == holder => {
+                self.resume(log, "released");
+                Ok(())
+            }
+            Some(p) => Err(format!(
+                "the pause is held by pid {}, not {holder}",
+                p.holder
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Continues what the pause lease stopped, and ends the lease.
+    fn resume(&mut self, log: &Log, why: &str) {
+        if let Some(p) = self.pause.take() {
+            signal_all(&p.stopped, libc::SIGCONT);
+            log.note(format_args!(
+                "resumed {} process{}: the pause lease of pid {} {why}",
+                p.stopped.len(),
+                if p.stopped.len() == 1 { "" } else { "es" },
+                p.holder
+            ));
+        }
+    }
+
+    /// Watches the swap under way, the retiring processes and the pause lease.
     pub(crate) fn poll(&mut self, slots: &[Slot<'_>], log: &Log) {
+        if let Some(p) = &self.pause {
+            let alive = process_alive(p.holder);
+            if p.is_over(Instant::now(), alive) {
+                self.resume(
+                    log,
+                    if alive {
+                        "expired"
+                    } else {
+                        "ended: its holder is gone"
+                    },
+                );
+            }
+        }
         // A restarted physics subscribes anew: hand it the latched epoch now, not at the
         // next swap.
         let _ = self.epochs.update_connections();
@@ -436,8 +631,10 @@ impl ControlPlane {
         self.answer(&swap.request, slots, log, Err(why));
     }
 
-    /// Stops what the swaps left running (at the end of the run).
+    /// Stops what the swaps left running and ends a pause (at the end of the run: a stopped
+    /// process could not act on its SIGTERM).
     pub(crate) fn shutdown(&mut self, slots: &[Slot<'_>], log: &Log) {
+        self.resume(log, "ended with the run");
         if self.swap.is_some() {
             self.abort_swap("the run is ending".to_owned(), slots, log);
         }
@@ -463,6 +660,67 @@ fn rate_of(slot: &Slot<'_>, rates: &MessageRates) -> Option<(&'static str, f64)>
     } else {
         None
     }
+}
+
+/// The live nodes of `instance` that are strangers, as `(name, pid)`: not of this
+/// supervisor, not of a process in `ours` or in one of their process groups (each child
+/// leads one: its own children are in it), not of a client (`agp status`, `agp down`,
+/// `agp swap`, `agp profile`: node `agp-cli-<pid>` or `agp-profile-<pid>` of an `agp`
+/// executable with that pid). The pid is the one the node declares.
+fn strangers(instance: &Instance, ours: &[u32]) -> Vec<(String, u32)> {
+    let me = std::process::id();
+    let mut found = Vec::new();
+    let _ = Node::<AgpIpc>::list(instance.config(), |state| {
+        if let NodeState::Alive(view) = state {
+            match view.details() {
+                Some(d) => {
+                    let name = d.name().as_str().to_owned();
+                    let pid = u32::try_from(d.process_id().value()).unwrap_or(0);
+                    if pid != me && !belongs_to(pid, ours) && !is_client(&name, pid) {
+                        found.push((name, pid));
+                    }
+                }
+                None => found.push((String::new(), 0)),
+            }
+        }
+        CallbackProgression::Continue
+    });
+    found.sort_by_key(|s| s.1);
+    found
+}
+
+/// Whether `pid` is one of `ours` or in the process group one of them leads.
+fn belongs_to(pid: u32, ours: &[u32]) -> bool {
+    if ours.contains(&pid) {
+        return true;
+    }
+    let Ok(p) = libc::pid_t::try_from(pid) else {
+        return false;
+    };
+    // SAFETY: getpgid(2) reads the process group of a pid; no memory is involved.
+    let group = unsafe { libc::getpgid(p) };
+    group > 0 && u32::try_from(group).is_ok_and(|g| ours.contains(&g))
+}
+
+/// Whether node `name` of process `pid` is an `agp` client's.
+fn is_client(name: &str, pid: u32) -> bool {
+    let own_name = ["agp-cli-", "agp-profile-"]
+        .iter()
+        .any(|p| name.strip_prefix(p) == Some(pid.to_string().as_str()));
+    if !own_name {
+        return false;
+    }
+    let Ok(exe) = std::fs::read_link(format!("/proc/{pid}/exe")) else {
+        return false;
+    };
+    // A rebuilt `agp` still running shows as `agp (deleted)`.
+    exe.file_name()
+        .map(|n| {
+            n.to_string_lossy()
+                .trim_end_matches(" (deleted)")
+                .to_owned()
+        })
+        .is_some_and(|n| n == "agp")
 }
 
 /// Each process's state into a status reply.
@@ -491,5 +749,52 @@ fn fill_status(slots: &[Slot<'_>], rates: Option<&MessageRates>, out: &mut Contr
             write_str(&mut p.rate_topic, topic);
             p.rate_mhz = (rate * 1e3).round() as u64;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pause_lease_whose_holder_stops_renewing_ends_at_its_deadline() {
+        let now = Instant::now();
+        let lease = PauseLease {
+            holder: 42,
+            deadline: PauseLease::deadline_for(now, Duration::from_secs(3)),
+            stopped: Vec::new(),
+        };
+        assert!(!lease.is_over(now + Duration::from_secs(2), true));
+        assert!(lease.is_over(now + Duration::from_secs(3), true));
+        assert!(lease.is_over(now, false), "a dead holder ends it at once");
+    }
+
+    #[test]
+    fn no_pause_lease_outlasts_the_longest_one_granted() {
+        let now = Instant::now();
+        assert_eq!(
+            PauseLease::deadline_for(now, Duration::from_secs(86_400)),
+            now + MAX_PAUSE_LEASE
+        );
+    }
+
+    #[test]
+    fn the_supervisor_itself_and_the_processes_of_a_childs_group_are_no_strangers() {
+        // This test process leads no group of its own, but its pid is `ours`.
+        let me = std::process::id();
+        assert!(belongs_to(me, &[me]));
+        // SAFETY: getpgid(0): the caller's own process group.
+        let group = u32::try_from(unsafe { libc::getpgid(0) }).expect("a group");
+        assert!(belongs_to(me, &[group]), "a member of a listed group");
+        assert!(!belongs_to(me, &[]));
+    }
+
+    #[test]
+    fn a_node_named_like_a_client_is_a_stranger_unless_an_agp_with_that_pid_made_it() {
+        let me = std::process::id();
+        // The test executable is not `agp`.
+        assert!(!is_client(&format!("agp-cli-{me}"), me));
+        assert!(!is_client("agp-cli-1", me));
+        assert!(!is_client("intruder", me));
     }
 }

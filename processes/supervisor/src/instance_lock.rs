@@ -1,12 +1,16 @@
 //! One live supervisor per instance: an exclusive `flock` on `<base>/<name>.lock`, next to
 //! (not inside) the instance's iceoryx2 root folder.
+//!
+//! The lock is opened without following a link, and only as a regular file of this user,
+//! in a base folder of this user's mode 0700 ([`Instance::prepare_dirs`]): a link planted
+//! there by someone else is refused, never truncated through.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Write};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use agp_shared_types::Instance;
+use agp_shared_types::{Instance, InstanceDirError};
 
 /// Held while a supervisor owns its instance; released (and the file removed) on drop. The
 /// kernel releases the lock when the supervisor dies, however it dies.
@@ -30,6 +34,12 @@ pub enum InstanceLockError {
         path: PathBuf,
         pid: Option<u32>,
     },
+    /// The base folder the lock lives in is not safe to use.
+    #[error(transparent)]
+    Dir(#[from] InstanceDirError),
+    /// The lock path is a link, not a regular file, or another user's.
+    #[error("refusing the lock {}: {why}", path.display())]
+    Unsafe { path: PathBuf, why: String },
     /// The lock file could not be created or locked.
     #[error("cannot lock {}: {source}", path.display())]
     Io {
@@ -55,20 +65,11 @@ impl InstanceLock {
             path: path.clone(),
             source,
         };
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(io)?;
-        }
+        instance.prepare_base()?;
         // A releasing supervisor unlinks the file while it still holds the lock: whoever
         // locked the unlinked file retries on the path's new one.
         for _ in 0..16 {
-            let mut file = OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create(true)
-                .truncate(false)
-                .mode(0o644)
-                .open(&path)
-                .map_err(io)?;
+            let mut file = open_lock(&path, true)?;
             match file.try_lock() {
                 Ok(()) => {}
                 Err(TryLockError::WouldBlock) => {
@@ -99,6 +100,46 @@ impl InstanceLock {
             "the lock file kept changing under us",
         )))
     }
+}
+
+/// Opens the lock file at `path` (created mode 0600 if `create`) without following a link
+/// and without blocking on a FIFO, and checks it is a regular file of this user.
+pub(crate) fn open_lock(path: &Path, create: bool) -> Result<File, InstanceLockError> {
+    let refuse = |why: &str| InstanceLockError::Unsafe {
+        path: path.to_path_buf(),
+        why: why.to_owned(),
+    };
+    let file = OpenOptions::new()
+        .read(true)
+        .write(create)
+        .create(create)
+        .truncate(false)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC | libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc::ELOOP) => refuse("it is a symbolic link"),
+            _ => InstanceLockError::Io {
+                path: path.to_path_buf(),
+                source: e,
+            },
+        })?;
+    let meta = file.metadata().map_err(|source| InstanceLockError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if !meta.file_type().is_file() {
+        return Err(refuse("it is not a regular file"));
+    }
+    // SAFETY: geteuid(2) has no preconditions and cannot fail.
+    let uid = unsafe { libc::geteuid() };
+    if meta.uid() != uid {
+        return Err(refuse(&format!(
+            "it belongs to uid {}, not to this user (uid {uid})",
+            meta.uid()
+        )));
+    }
+    Ok(file)
 }
 
 impl Drop for InstanceLock {

@@ -35,6 +35,16 @@ enum Cmd {
     /// Start the processes of a launch file under one instance, watch them, restart them
     /// as their policy says, and stop them all (leaving no file behind) on Ctrl-C, SIGTERM,
     /// or when a process marked `ends_run` exits with status 0.
+    ///
+    /// Any stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGPIPE, ...)
+    /// stops the run cleanly; so does a closed stdout (`agp up | head -1`: SIGPIPE).
+    ///
+    /// Exit status: 0 the run ended as asked (its `ends_run` process finished, or `agp
+    /// down`) and its task, if any, succeeded; 1 the run ended in error (a process failed
+    /// past its restart policy, the verdict could not be judged or written, files of the
+    /// instance remain) or could not start; 2 the launch file or the environment is
+    /// invalid, nothing was started; 3 the task failed (the judge's `NOT placed`, or the
+    /// path's end not reached); 128 + N stopped by signal N (130 Ctrl-C, 143 SIGTERM).
     Up(UpArgs),
     /// Show each process of a running instance: state, pid, restarts, uptime.
     Status(StatusArgs),
@@ -229,7 +239,7 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            eprintln!("agp: error: {e:#}");
+            up::warn(format_args!("agp: error: {e:#}"));
             ExitCode::FAILURE
         }
     }
@@ -238,9 +248,9 @@ fn main() -> ExitCode {
 fn up(args: &UpArgs) -> Result<u8> {
     // Every child inherits it: a value that names no strategy is refused here, not guessed.
     if let Err(why) = agp_shared_types::WaitStrategy::from_env_checked() {
-        eprintln!("agp: error: {why}");
-        eprintln!("agp: nothing was started");
-        return Ok(2);
+        up::warn(format_args!("agp: error: {why}"));
+        up::warn(format_args!("agp: nothing was started"));
+        return Ok(up::exit::INVALID);
     }
     let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
     let options = LaunchOptions {
@@ -251,10 +261,10 @@ fn up(args: &UpArgs) -> Result<u8> {
         Ok(c) => c,
         Err(e) => {
             for line in e.to_string().lines() {
-                eprintln!("agp: error: {line}");
+                up::warn(format_args!("agp: error: {line}"));
             }
-            eprintln!("agp: nothing was started");
-            return Ok(2);
+            up::warn(format_args!("agp: nothing was started"));
+            return Ok(up::exit::INVALID);
         }
     };
     if args.detach && std::env::var_os(DETACHED_ENV).is_none() {
@@ -267,9 +277,15 @@ fn up(args: &UpArgs) -> Result<u8> {
 const DETACHED_ENV: &str = "AGP_DETACHED";
 
 /// `agp up --detach`: starts `agp up` again in a session of its own with its output in a
-/// log file, and returns once its status says every process runs.
+/// log file, and returns once its status says every process runs. An instance another
+/// supervisor holds is refused at once, naming that supervisor's pid; and only the status
+/// of the supervisor it started (its pid) counts as started.
 fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
     use std::os::unix::process::CommandExt;
+    let instance = agp_shared_types::Instance::new(&config.instance)
+        .map_err(|e| anyhow::anyhow!("bad instance name `{}`: {e}", config.instance))?;
+    // Whoever holds the lock is named by it; released at once when no one does.
+    drop(instance_lock::InstanceLock::acquire(&instance)?);
     std::fs::create_dir_all(&config.results).with_context(|| {
         format!(
             "cannot create the results folder {}",
@@ -318,6 +334,13 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
         }
         if let Ok(r) = control::ask(&config.instance, agp_shared_types::ControlKind::Status) {
             let report = control::StatusReport::new(&config.instance, &r);
+            if report.supervisor_pid != child.id() {
+                anyhow::bail!(
+                    "instance `{}` is already up under supervisor pid {}; stop it first or pick another name with `--instance`",
+                    config.instance,
+                    report.supervisor_pid
+                );
+            }
             if report.all_running() {
                 report.print();
                 println!(
@@ -393,19 +416,19 @@ impl Swapped {
                 "handover_us": self.handover_us,
                 "exec": self.exec,
             });
-            println!(
+            up::say(format_args!(
                 "{}",
                 serde_json::to_string(&v).context("cannot encode JSON")?
-            );
+            ));
         } else {
-            println!(
+            up::say(format_args!(
                 "agp: swapped `{}` of instance `{}`: pid {}, epoch {}, handover {:.1} us (ready -> first command applied)",
                 self.process,
                 self.instance,
                 self.pid.map_or("-".to_owned(), |p| p.to_string()),
                 self.epoch,
                 self.handover_us
-            );
+            ));
         }
         Ok(())
     }
@@ -488,26 +511,26 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
     if file_stamp(path).is_none() {
         anyhow::bail!("--watch {}: no such file", path.display());
     }
-    eprintln!(
+    up::warn(format_args!(
         "agp: watching {} for `{}` of instance `{name}`: each new build is swapped in (Ctrl-C to stop)",
         path.display(),
         args.process
-    );
+    ));
     let mut swapped_stamp = None;
     let mut swaps = 0u32;
     let mut refused = 0u32;
     loop {
         if let Some(s) = signals::first() {
-            eprintln!(
+            up::warn(format_args!(
                 "agp: watch stopped by {}: {swaps} swaps, {refused} refused",
                 signals::name(s)
-            );
+            ));
             return Ok(0);
         }
         if !control::is_up(&instance) {
-            eprintln!(
+            up::warn(format_args!(
                 "agp: instance `{name}` is down: watch ends ({swaps} swaps, {refused} refused)"
-            );
+            ));
             return Ok(0);
         }
         let stamp = file_stamp(path);
@@ -525,12 +548,15 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
                 Err(e) => {
                     refused += 1;
                     if args.json {
-                        println!(
+                        up::say(format_args!(
                             "{}",
                             serde_json::json!({"instance": name, "process": args.process, "refused": format!("{e:#}")})
-                        );
+                        ));
                     } else {
-                        println!("agp: {e:#}; the running `{}` drives on", args.process);
+                        up::say(format_args!(
+                            "agp: {e:#}; the running `{}` drives on",
+                            args.process
+                        ));
                     }
                 }
             }
@@ -541,7 +567,11 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
 
 fn down(args: &DownArgs) -> Result<u8> {
     let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
-    control::down(&name, std::time::Duration::from_secs(args.timeout_s))?;
-    println!("agp: instance `{name}` is down");
+    match control::down(&name, std::time::Duration::from_secs(args.timeout_s))? {
+        control::DownOutcome::Stopped => println!("agp: instance `{name}` is down"),
+        control::DownOutcome::Cleaned { removed } => println!(
+            "agp: instance `{name}` had no supervisor (it died); removed {removed} leftover file(s): it is down"
+        ),
+    }
     Ok(0)
 }

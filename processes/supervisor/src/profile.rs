@@ -22,20 +22,30 @@
 //! a copy of itself (`agp profile-floor-pong`), waiting as the pipeline waits (the
 //! supervisor reports its `AGP_WAIT`; the profiler's own is not used) and notifying after
 //! every send as the pipeline does. While the floor runs, the instance's processes are
-//! paused (SIGSTOP, then SIGCONT, also on an error or Ctrl-C), so the floor has the machine
-//! as the pipeline had it: on two cores a running pipeline would otherwise compete with
-//! the floor it is compared to. A lockstep pipeline loses nothing by the pause. `--no-pause` keeps the pipeline running instead.
+//! paused, so the floor has the machine as the pipeline had it: on two cores a running
+//! pipeline would otherwise compete with the floor it is compared to. A lockstep pipeline
+//! loses nothing by the pause. `--no-pause` keeps the pipeline running instead.
+//!
+//! The pause is a lease the profiler takes from the instance's supervisor
+//! ([`ControlKind::Pause`]) with a deadline a few seconds past the floor's expected end,
+//! renewed if the floor runs longer and released at its end: the supervisor stops and
+//! continues its processes, so a profiler that dies, even by SIGKILL, leaves the pipeline
+//! paused at most until the deadline. The pong side dies with the profiler
+//! (`PR_SET_PDEATHSIG`), and the next `agp profile` removes the files of a floor whose
+//! profiler died.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_shared_types::{
-    AgpIpc, Instance, IrFrame, TimingHeader, WaitOutcome, WaitStrategy, Waiter,
-    install_shutdown_handler, monotonic_ns, shutdown_requested, stage,
+    AgpIpc, ControlClient, ControlKind, ControlRequest, Instance, IrFrame, TimingHeader,
+    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, read_str,
+    shutdown_requested, stage,
 };
 use anyhow::{Context, Result, anyhow, bail};
 use hdrhistogram::Histogram;
+use iceoryx2::node::NodeState;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -70,8 +80,9 @@ pub struct ProfileArgs {
     /// Also plot the latency histograms (each hop, end to end, the floor) as SVG here.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
-    /// Keep the pipeline running while the floor runs (by default its processes are paused
-    /// for that second, so the floor does not compete with them for the cores).
+    /// Keep the pipeline running while the floor runs (by default its supervisor pauses its
+    /// processes for that second, under a lease that ends by itself a few seconds after the
+    /// floor should have, so the floor does not compete with them for the cores).
     #[arg(long)]
     pub no_pause: bool,
 }
@@ -92,6 +103,18 @@ const FLOOR_WARMUP: u64 = 200;
 
 /// The longest wait for one message of the floor, or for its pong side to come up.
 const FLOOR_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How far past the floor's expected end the pause lease lasts, and how long a renewal
+/// extends it.
+const LEASE_MARGIN: Duration = Duration::from_secs(3);
+
+/// A lease with less than this left is renewed.
+const LEASE_RENEW_BEFORE: Duration = Duration::from_secs(2);
+
+/// The instance name of the floor of the profiler with process id `pid`.
+fn floor_instance_name(pid: u32) -> String {
+    format!("pfloor-{pid}")
+}
 
 /// A span between two stamps of a control step.
 #[derive(Debug, Clone, Copy)]
@@ -536,48 +559,134 @@ impl FloorPorts {
 struct Floor {
     histogram: Histogram<u64>,
     round_trips: u64,
+    /// How many processes of the pipeline were paused while it ran (`None`: not paused).
+    paused: Option<u32>,
 }
 
-/// The processes of an instance, paused (SIGSTOP to each one's process group) until
-/// dropped (SIGCONT).
-struct Paused {
-    pids: Vec<libc::pid_t>,
+/// The pipeline of an instance paused by its supervisor under a lease this process holds,
+/// until the lease's deadline or [`PauseLease::release`] (also on drop).
+struct PauseLease {
+    client: ControlClient,
+    _node: Node<AgpIpc>,
+    /// The deadline as this side counts it (the supervisor's is no later).
+    deadline: Instant,
+    /// How many processes the supervisor paused.
+    processes: u32,
+    released: bool,
 }
 
-impl Paused {
-    /// Pauses every running process of instance `name`, as its supervisor lists them.
-    fn pipeline(name: &str) -> Result<Self> {
-        let r = control::ask(name, agp_shared_types::ControlKind::Status)?;
-        let report = control::StatusReport::new(name, &r);
-        let mut paused = Self { pids: Vec::new() };
-        for p in &report.processes {
-            let Some(pid) = p.pid.and_then(|pid| libc::pid_t::try_from(pid).ok()) else {
-                continue;
-            };
-            if p.state != "running" {
-                continue;
-            }
-            // Each child leads a process group of its own (`agp up`): pause the group, or
-            // the process alone if it leads none.
-            for target in [-pid, pid] {
-                // SAFETY: kill(2) of a pid the supervisor reported; no memory is involved.
-                if unsafe { libc::kill(target, libc::SIGSTOP) } == 0 {
-                    paused.pids.push(target);
-                    break;
-                }
-            }
+impl PauseLease {
+    /// Asks the supervisor of `instance` to pause its processes for `len`.
+    fn take(instance: &Instance, len: Duration) -> Result<Self> {
+        let node = instance
+            .node(&format!("agp-cli-{}", std::process::id()), false)
+            .map_err(|e| anyhow!("cannot create an iceoryx2 node: {e:?}"))?;
+        let client = ControlClient::open(instance, &node, FLOOR_TIMEOUT)?;
+        let mut lease = Self {
+            client,
+            _node: node,
+            deadline: Instant::now(),
+            processes: 0,
+            released: false,
+        };
+        lease.processes = lease.ask_pause(len)?;
+        Ok(lease)
+    }
+
+    /// Asks for (or renews) the pause for `len` from now; the processes paused.
+    fn ask_pause(&mut self, len: Duration) -> Result<u32> {
+        let mut request = ControlRequest::new(ControlKind::Pause);
+        request.pid = std::process::id();
+        request.value_ns = u64::try_from(len.as_nanos()).unwrap_or(u64::MAX);
+        let asked = Instant::now();
+        let r = self.client.ask(&request, FLOOR_TIMEOUT)?;
+        if r.ok == 0 {
+            bail!("the supervisor refused the pause: {}", read_str(&r.message));
         }
-        Ok(paused)
+        self.deadline = asked + len.min(agp_shared_types::MAX_PAUSE_LEASE);
+        Ok(r.paused)
+    }
+
+    /// Renews the lease if little of it is left.
+    fn renew_if_due(&mut self) -> Result<()> {
+        if self.deadline.saturating_duration_since(Instant::now()) < LEASE_RENEW_BEFORE {
+            self.ask_pause(LEASE_MARGIN)?;
+        }
+        Ok(())
+    }
+
+    /// Gives the lease back: the processes run again.
+    fn release(&mut self) -> Result<()> {
+        if self.released {
+            return Ok(());
+        }
+        self.released = true;
+        let mut request = ControlRequest::new(ControlKind::Resume);
+        request.pid = std::process::id();
+        let r = self.client.ask(&request, FLOOR_TIMEOUT)?;
+        if r.ok == 0 {
+            bail!(
+                "the supervisor refused the resume: {}",
+                read_str(&r.message)
+            );
+        }
+        Ok(())
     }
 }
 
-impl Drop for Paused {
+impl Drop for PauseLease {
     fn drop(&mut self) {
-        for &pid in &self.pids {
-            // SAFETY: kill(2) of a pid this guard stopped.
-            unsafe { libc::kill(pid, libc::SIGCONT) };
+        // On an error or Ctrl-C: the deadline would resume the pipeline, but sooner is
+        // better.
+        let _ = self.release();
+    }
+}
+
+/// Removes the files of the floors whose profiler died (killed before it could): an
+/// instance `pfloor-<pid>` whose process `pid` is gone and which has no live node.
+fn clean_dead_floors() {
+    let Ok(probe) = Instance::new(&floor_instance_name(0)) else {
+        return;
+    };
+    let Some(base) = probe.root_dir().parent() else {
+        return;
+    };
+    let Ok(entries) = std::fs::read_dir(base) else {
+        return;
+    };
+    for entry in entries.filter_map(Result::ok) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix("pfloor-")
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if name != floor_instance_name(pid) || pid == std::process::id() || process_exists(pid) {
+            continue;
+        }
+        let Ok(instance) = Instance::new(&name) else {
+            continue;
+        };
+        let mut alive = false;
+        let listed = Node::<AgpIpc>::list(instance.config(), |state| {
+            alive |= matches!(state, NodeState::Alive(_));
+            CallbackProgression::Continue
+        });
+        if listed.is_ok() && !alive {
+            let _ = instance.remove_files();
         }
     }
+}
+
+/// Whether process `pid` exists.
+fn process_exists(pid: u32) -> bool {
+    let Ok(pid) = libc::pid_t::try_from(pid) else {
+        return false;
+    };
+    // SAFETY: kill(2) with signal 0 only checks that the process exists.
+    let rc = unsafe { libc::kill(pid, 0) };
+    rc == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
 }
 
 /// How the processes of instance `name` wait, as its supervisor reports it: the floor must
@@ -602,10 +711,11 @@ fn pipeline_waiting(name: &str) -> Result<WaitStrategy> {
     Ok(waiting)
 }
 
-/// The ping side: starts the pong side, both waiting by `waiting`, measures for `seconds`,
-/// stops it, removes the floor's files.
-fn run_floor(seconds: f64, waiting: WaitStrategy) -> Result<Floor> {
-    let name = format!("pfloor-{}", std::process::id());
+/// The ping side: starts the pong side, both waiting by `waiting`, measures for `seconds`
+/// (with the pipeline of `pause` paused meanwhile, if given), stops it, removes the floor's
+/// files.
+fn run_floor(seconds: f64, waiting: WaitStrategy, pause: Option<&Instance>) -> Result<Floor> {
+    let name = floor_instance_name(std::process::id());
     let instance =
         Instance::new(&name).map_err(|e| anyhow!("bad floor instance name `{name}`: {e}"))?;
     let _ = instance.remove_files();
@@ -615,14 +725,15 @@ fn run_floor(seconds: f64, waiting: WaitStrategy) -> Result<Floor> {
             .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
         let ports = FloorPorts::open(&node, true, waiting)?;
         let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
-        let child = Command::new(exe)
-            .args([FLOOR_PONG_SUBCOMMAND, "--instance", &name])
+        let mut cmd = Command::new(exe);
+        cmd.args([FLOOR_PONG_SUBCOMMAND, "--instance", &name])
             .env(WaitStrategy::ENV, waiting.name())
-            .stdin(Stdio::null())
-            .spawn()
-            .context("cannot start the floor's pong side")?;
+            .stdin(Stdio::null());
+        // It dies with the profiler, however the profiler ends.
+        let child =
+            crate::up::spawn_guarded(&mut cmd).context("cannot start the floor's pong side")?;
         let mut child = KillOnDrop(child);
-        let floor = ping(&ports, seconds);
+        let floor = ping(&ports, seconds, pause);
         // Stop the pong side however the ping ended; it also times out on its own.
         let _ = ports.send(FLOOR_STOP, 0);
         let deadline = Instant::now() + Duration::from_secs(5);
@@ -650,15 +761,25 @@ impl Drop for KillOnDrop {
     }
 }
 
-fn ping(ports: &FloorPorts, seconds: f64) -> Result<Floor> {
+fn ping(ports: &FloorPorts, seconds: f64, pause: Option<&Instance>) -> Result<Floor> {
     while ports.next()?.0 != FLOOR_READY {}
-    let mut h = histogram();
     let duration = Duration::from_secs_f64(seconds);
+    let mut lease = match pause {
+        Some(instance) => Some(
+            PauseLease::take(instance, duration + LEASE_MARGIN)
+                .context("cannot pause the pipeline for the floor")?,
+        ),
+        None => None,
+    };
+    let mut h = histogram();
     let start = Instant::now();
     let mut seq = 0u64;
     while seq < FLOOR_WARMUP || start.elapsed() < duration {
         if shutdown_requested() {
             bail!("floor: interrupted");
+        }
+        if let Some(lease) = &mut lease {
+            lease.renew_if_due()?;
         }
         ports.send(seq, monotonic_ns())?;
         let rtt = loop {
@@ -672,9 +793,19 @@ fn ping(ports: &FloorPorts, seconds: f64) -> Result<Floor> {
         }
         seq += 1;
     }
+    let paused = match &mut lease {
+        Some(lease) => {
+            lease
+                .release()
+                .context("cannot resume the pipeline after the floor")?;
+            Some(lease.processes)
+        }
+        None => None,
+    };
     Ok(Floor {
         round_trips: h.len(),
         histogram: h,
+        paused,
     })
 }
 
@@ -725,6 +856,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");
     }
     install_shutdown_handler();
+    clean_dead_floors();
     let waiting = pipeline_waiting(&name)?;
     let sampling = sample_pipeline(&instance, args.seconds)?;
     if shutdown_requested() {
@@ -743,18 +875,13 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
             sampling.frames
         );
     }
-    let floor = {
-        let paused = if args.no_pause {
-            None
-        } else {
-            Some(Paused::pipeline(&name).context("cannot pause the pipeline for the floor")?)
-        };
-        let floor = run_floor(args.floor_seconds, waiting).context("the floor failed");
-        let paused_processes = paused.as_ref().map(|p| p.pids.len());
-        drop(paused);
-        (floor?, paused_processes)
-    };
-    let (floor, paused) = floor;
+    let floor = run_floor(
+        args.floor_seconds,
+        waiting,
+        (!args.no_pause).then_some(&instance),
+    )
+    .context("the floor failed")?;
+    let paused = floor.paused.map(|n| n as usize);
     let load = load_average();
     let report = Report {
         instance: name,
@@ -1196,6 +1323,7 @@ mod tests {
             floor: Floor {
                 histogram: floor,
                 round_trips: 1,
+                paused: None,
             },
             floor_seconds: 1.0,
             paused: None,

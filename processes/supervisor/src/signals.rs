@@ -1,4 +1,6 @@
-//! SIGINT, SIGTERM and SIGHUP to the supervisor, seen as flags its loop polls.
+//! Stop signals to the supervisor, seen as flags its loop polls: every catchable signal
+//! whose default would end the process ([`STOP_SIGNALS`]) stops the run cleanly instead,
+//! as SIGTERM does, so no signal but SIGKILL leaves the instance's files behind.
 
 use std::sync::atomic::{AtomicI32, AtomicU32, Ordering};
 
@@ -13,10 +15,35 @@ extern "C" fn on_stop_signal(signal: libc::c_int) {
     COUNT.fetch_add(1, Ordering::SeqCst);
 }
 
-/// Installs the handler of SIGINT, SIGTERM and SIGHUP. Children get the default
-/// dispositions back when they exec.
+/// The signals that stop the supervisor cleanly: every catchable one whose default action
+/// ends the process, but those a fault raises in the faulting thread (SIGSEGV, SIGBUS,
+/// SIGFPE, SIGILL, SIGTRAP, SIGSYS, SIGABRT), which cannot be returned from, and the
+/// real-time ones (the waiting code of `agp_shared_types` uses one as its timer).
+///
+/// SIGPIPE is one: a write to a closed stdout (`agp up | head -1`) raises it, and the run
+/// then stops as on SIGTERM and exits 128 + 13, as a shell pipeline expects.
+pub const STOP_SIGNALS: [libc::c_int; 15] = [
+    libc::SIGINT,
+    libc::SIGTERM,
+    libc::SIGHUP,
+    libc::SIGQUIT,
+    libc::SIGUSR1,
+    libc::SIGUSR2,
+    libc::SIGPIPE,
+    libc::SIGALRM,
+    libc::SIGVTALRM,
+    libc::SIGPROF,
+    libc::SIGXCPU,
+    libc::SIGXFSZ,
+    libc::SIGIO,
+    libc::SIGPWR,
+    libc::SIGSTKFLT,
+];
+
+/// Installs the handler of every [`STOP_SIGNALS`]. Children get the default dispositions
+/// back when they exec.
 pub fn install() -> std::io::Result<()> {
-    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+    for signal in STOP_SIGNALS {
         // SAFETY: the handler only touches atomics; the sigaction struct is ours and zeroed.
         let rc = unsafe {
             let mut action: libc::sigaction = std::mem::zeroed();
@@ -51,6 +78,19 @@ pub fn name(signal: i32) -> String {
         libc::SIGINT => "SIGINT".into(),
         libc::SIGTERM => "SIGTERM".into(),
         libc::SIGHUP => "SIGHUP".into(),
+        libc::SIGQUIT => "SIGQUIT".into(),
+        libc::SIGUSR1 => "SIGUSR1".into(),
+        libc::SIGUSR2 => "SIGUSR2".into(),
+        libc::SIGALRM => "SIGALRM".into(),
+        libc::SIGVTALRM => "SIGVTALRM".into(),
+        libc::SIGPROF => "SIGPROF".into(),
+        libc::SIGXCPU => "SIGXCPU".into(),
+        libc::SIGXFSZ => "SIGXFSZ".into(),
+        libc::SIGIO => "SIGIO".into(),
+        libc::SIGPWR => "SIGPWR".into(),
+        libc::SIGSTKFLT => "SIGSTKFLT".into(),
+        libc::SIGTRAP => "SIGTRAP".into(),
+        libc::SIGSYS => "SIGSYS".into(),
         libc::SIGKILL => "SIGKILL".into(),
         libc::SIGSEGV => "SIGSEGV".into(),
         libc::SIGABRT => "SIGABRT".into(),

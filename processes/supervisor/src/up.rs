@@ -1,6 +1,7 @@
 //! `agp up`: owns one instance for the length of a run: its lock, its iceoryx2 services, its
 //! processes, and the removal of every file it leaves.
 
+use std::io::Write;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -32,6 +33,25 @@ const SWAP_POLL: Duration = Duration::from_micros(200);
 /// and the kernel is killing them) before `up` refuses to clean their files.
 const LEFTOVER_DEATH_WAIT: Duration = Duration::from_secs(3);
 
+/// The exit statuses of `agp up` (its `--help` lists them).
+pub(crate) mod exit {
+    /// The run ended as asked (its `ends_run` process finished, or `agp down`), and its
+    /// task, if it had one, succeeded.
+    pub(crate) const OK: u8 = 0;
+    /// The run ended in error: a process failed past its restart policy or could not be
+    /// started, every process exited with none marked `ends_run`, the verdict could not be
+    /// judged or written, or files of the instance remain; or nothing could start (the
+    /// instance is held, its leftovers cannot be removed).
+    pub(crate) const ERROR: u8 = 1;
+    /// The launch file or the environment is invalid: nothing was started.
+    pub(crate) const INVALID: u8 = 2;
+    /// The run ended by itself and the judge says the task failed (`NOT placed`, the
+    /// path's end not reached).
+    pub(crate) const TASK_FAILED: u8 = 3;
+    /// Stopped by signal N (SIGINT, SIGTERM, ...): 128 + N, as a shell reports it.
+    pub(crate) const SIGNAL_BASE: u8 = 128;
+}
+
 /// Why a run ended.
 #[derive(Debug)]
 pub(crate) enum RunEnd {
@@ -48,13 +68,36 @@ pub(crate) enum RunEnd {
 }
 
 impl RunEnd {
-    fn exit_code(&self) -> u8 {
+    /// The exit status of `agp up` for a run that ended so: `errors` when something went
+    /// wrong after the run (the verdict or the cleaning), `task_failed` when the judge said
+    /// the task failed. A stop signal says how the run ended whatever the rest; an error
+    /// outranks a verdict; a run stopped by `agp down` has no verdict to answer for.
+    pub(crate) fn exit_code(&self, errors: bool, task_failed: bool) -> u8 {
         match self {
-            Self::Finished { .. } | Self::Down => 0,
-            Self::Signal(s) => u8::try_from(128 + s).unwrap_or(1),
-            Self::Failed { .. } | Self::AllExited => 1,
+            Self::Signal(s) => {
+                u8::try_from(i32::from(exit::SIGNAL_BASE) + s).unwrap_or(exit::ERROR)
+            }
+            Self::Failed { .. } | Self::AllExited => exit::ERROR,
+            Self::Finished { .. } | Self::Down if errors => exit::ERROR,
+            Self::Finished { .. } if task_failed => exit::TASK_FAILED,
+            Self::Finished { .. } | Self::Down => exit::OK,
         }
     }
+}
+
+/// Writes one line to stdout. A stdout nobody reads any more (`agp up | head -1`) is no
+/// reason to stop supervising: the write's error is dropped (the SIGPIPE it raised stops
+/// the run cleanly, see [`signals::STOP_SIGNALS`]), never a panic.
+pub(crate) fn say(line: std::fmt::Arguments<'_>) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}
+
+/// Writes one line to stderr; a closed stderr is ignored as [`say`] ignores a closed
+/// stdout.
+pub(crate) fn warn(line: std::fmt::Arguments<'_>) {
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
 }
 
 /// Prints one status line per event, stamped with the time since `up` started.
@@ -64,14 +107,17 @@ pub(crate) struct Log {
 
 impl Log {
     pub(crate) fn event(&self, process: &str, what: std::fmt::Arguments<'_>) {
-        println!(
+        say(format_args!(
             "[{:8.3} s] {process}: {what}",
             self.start.elapsed().as_secs_f64()
-        );
+        ));
     }
 
     pub(crate) fn note(&self, what: std::fmt::Arguments<'_>) {
-        println!("[{:8.3} s] {what}", self.start.elapsed().as_secs_f64());
+        say(format_args!(
+            "[{:8.3} s] {what}",
+            self.start.elapsed().as_secs_f64()
+        ));
     }
 }
 
@@ -154,7 +200,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             config.results.display()
         )
     })?;
-    println!(
+    say(format_args!(
         "agp: instance `{}`: {} process{}, scenario {}, {} at {} Hz, results in {}",
         config.instance,
         config.processes.len(),
@@ -167,7 +213,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
         config.clock.mode.as_str(),
         config.clock.rate_hz,
         config.results.display()
-    );
+    ));
 
     let node = instance
         .node("agp", false)
@@ -222,46 +268,55 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     drop(control);
     drop(services);
     drop(node);
-    let mut code = end.exit_code();
-    match instance.remove_files() {
-        Ok(_) => {}
-        Err(e) => {
-            eprintln!(
-                "agp: error: cannot remove the files of instance `{}`: {e}",
-                config.instance
-            );
-            code = code.max(1);
-        }
+    let mut errors = false;
+    if let Err(e) = instance.remove_files() {
+        warn(format_args!(
+            "agp: error: cannot remove the files of instance `{}`: {e}",
+            config.instance
+        ));
+        errors = true;
     }
     let left = instance.files();
     if !left.is_empty() {
-        eprintln!(
+        warn(format_args!(
             "agp: error: {} file(s) of instance `{}` remain: {:?}",
             left.len(),
             config.instance,
             left
-        );
-        code = code.max(1);
+        ));
+        errors = true;
     }
     drop(lock);
 
+    let mut task_failed = false;
     match verdict {
         Ok(Some(v)) => {
+            task_failed = !v.evaluation.success;
             match evaluation::report(&v, &scenario, &config.instance, &config.results) {
                 Ok((json, plot)) => {
-                    println!("agp: plot {}, JSON {}", plot.display(), json.display());
+                    say(format_args!(
+                        "agp: plot {}, JSON {}",
+                        plot.display(),
+                        json.display()
+                    ));
                 }
-                Err(e) => eprintln!("agp: error: cannot write the result: {e:#}"),
+                Err(e) => {
+                    warn(format_args!("agp: error: cannot write the result: {e:#}"));
+                    errors = true;
+                }
             }
             if v.gaps > 0 {
-                eprintln!(
+                warn(format_args!(
                     "agp: note: the judge missed {} ground-truth samples; the plotted path has gaps",
                     v.gaps
-                );
+                ));
             }
         }
         Ok(None) => {}
-        Err(e) => eprintln!("agp: error: the judge failed: {e:#}"),
+        Err(e) => {
+            warn(format_args!("agp: error: the judge failed: {e:#}"));
+            errors = true;
+        }
     }
     match &end {
         RunEnd::Finished { process } => {
@@ -271,21 +326,36 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             log.note(format_args!("stopped by {}", signals::name(*s)));
         }
         RunEnd::Failed { process, why } => {
-            eprintln!("agp: error: process `{process}` {why}");
+            warn(format_args!("agp: error: process `{process}` {why}"));
         }
         RunEnd::AllExited => {
-            eprintln!("agp: error: every process exited and none is marked `ends_run`");
+            warn(format_args!(
+                "agp: error: every process exited and none is marked `ends_run`"
+            ));
         }
         RunEnd::Down => {
             log.note(format_args!("stopped by `agp down`"));
         }
     }
+    let code = end.exit_code(errors, task_failed);
+    if code == exit::TASK_FAILED {
+        warn(format_args!(
+            "agp: the task failed (exit status {})",
+            exit::TASK_FAILED
+        ));
+    }
     Ok(code)
 }
 
 /// Removes what a previous run of this instance left, once no node of it is alive. The
-/// caller holds the instance lock, so no supervisor owns these files.
+/// caller holds the instance lock, so no supervisor owns these files. The instance's folders
+/// are checked first (ours, not links, 0700): a root folder planted by another user is
+/// refused, not listed or removed. Only this instance's files go: the prefix ends where the
+/// name does, so instance `pc` never touches those of `pc_x`.
 fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
+    if instance.root_dir().symlink_metadata().is_ok() {
+        instance.prepare_dirs()?;
+    }
     let deadline = Instant::now() + LEFTOVER_DEATH_WAIT;
     loop {
         let alive = alive_nodes(instance);
@@ -317,7 +387,7 @@ fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
 }
 
 /// The live iceoryx2 nodes of `instance`, as `name (pid N)`.
-fn alive_nodes(instance: &Instance) -> Vec<String> {
+pub(crate) fn alive_nodes(instance: &Instance) -> Vec<String> {
     let mut alive = Vec::new();
     let listed = Node::<AgpIpc>::list(instance.config(), |state| {
         if let NodeState::Alive(view) = state {
@@ -501,7 +571,30 @@ pub(crate) fn spawn_process(
         .envs(config.context_env(process))
         .env("AGP_EPOCH", epoch.to_string())
         .stdin(Stdio::null());
+    // The run's secret goes to physics alone; every other child gets its epoch's token, so
+    // physics applies commands of the processes this supervisor started only.
+    let key = run_session_key()?;
+    if exec.file_name().is_some_and(|n| n == "agp-physics") {
+        cmd.env(agp_shared_types::SESSION_KEY_ENV, key.to_hex())
+            .env_remove(agp_shared_types::SESSION_TOKEN_ENV);
+    } else {
+        cmd.env(
+            agp_shared_types::SESSION_TOKEN_ENV,
+            key.token(epoch).to_string(),
+        )
+        .env_remove(agp_shared_types::SESSION_KEY_ENV);
+    }
     spawn_guarded(&mut cmd)
+}
+
+/// The secret of this run of the supervisor, made at its first child.
+fn run_session_key() -> std::io::Result<agp_shared_types::SessionKey> {
+    static KEY: std::sync::OnceLock<agp_shared_types::SessionKey> = std::sync::OnceLock::new();
+    if let Some(k) = KEY.get() {
+        return Ok(*k);
+    }
+    let key = agp_shared_types::SessionKey::random()?;
+    Ok(*KEY.get_or_init(|| key))
 }
 
 /// Spawns `cmd` in a process group of its own, killed by the kernel if `agp` dies.
@@ -626,5 +719,35 @@ fn stop_all(slots: &mut [Slot<'_>], log: &Log) {
         if !stopping.is_empty() {
             std::thread::sleep(POLL);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_finished_run_whose_task_failed_exits_non_zero_and_an_error_outranks_it() {
+        let finished = RunEnd::Finished {
+            process: "planner".to_owned(),
+        };
+        assert_eq!(finished.exit_code(false, false), exit::OK);
+        assert_eq!(finished.exit_code(false, true), exit::TASK_FAILED);
+        assert_eq!(finished.exit_code(true, true), exit::ERROR);
+        assert_eq!(RunEnd::Down.exit_code(true, false), exit::ERROR);
+        assert_eq!(RunEnd::Down.exit_code(false, true), exit::OK);
+        let failed = RunEnd::Failed {
+            process: "physics".to_owned(),
+            why: "crashed".to_owned(),
+        };
+        assert_eq!(failed.exit_code(false, false), exit::ERROR);
+        assert_eq!(RunEnd::AllExited.exit_code(false, false), exit::ERROR);
+        assert_eq!(RunEnd::Signal(libc::SIGTERM).exit_code(true, true), 143);
+        assert_eq!(RunEnd::Signal(libc::SIGPIPE).exit_code(false, false), 141);
+        let codes = [exit::OK, exit::ERROR, exit::INVALID, exit::TASK_FAILED];
+        assert!(codes.iter().all(|c| *c < exit::SIGNAL_BASE));
+        let mut distinct = codes.to_vec();
+        distinct.dedup();
+        assert_eq!(distinct.len(), codes.len(), "distinct exit statuses");
     }
 }
