@@ -2,3 +2,4 @@
 
 pub mod hop;
 pub mod math;
+pub mod pipeline;
