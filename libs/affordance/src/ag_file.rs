@@ -1,5 +1,4 @@
-use std::io::{Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use agp_shared_types::{GRID_CELLS, GRID_SIDE, MAX_GRID_ALPHAS};
@@ -486,49 +485,29 @@ fn check_cells(g: usize, cells: &[f32]) -> Option<String> {
 }
 
 /// Reads at most [`MAX_AG_FILE_BYTES`] of the regular file `path`, without blocking on a
-/// FIFO (opened with `O_NONBLOCK`, its type checked on the open descriptor).
+/// FIFO (`agp_world::read_regular_file`: opened with `O_NONBLOCK`, its type checked on the
+/// open descriptor).
 fn read_bounded(path: &Path) -> Result<Vec<u8>, AgFileLoadError> {
-    use std::os::unix::fs::FileTypeExt;
-    let io = |source| AgFileLoadError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(io)?;
-    let kind = file.metadata().map_err(io)?.file_type();
-    if !kind.is_file() {
-        let kind = if kind.is_dir() {
-            "a directory"
-        } else if kind.is_fifo() {
-            "a FIFO"
-        } else if kind.is_char_device() {
-            "a character device"
-        } else if kind.is_block_device() {
-            "a block device"
-        } else if kind.is_socket() {
-            "a socket"
-        } else {
-            "a special file"
-        };
-        return Err(AgFileLoadError::NotRegularFile {
+    use agp_world::BoundedReadError;
+    agp_world::read_regular_file(path, MAX_AG_FILE_BYTES).map_err(|e| match e {
+        BoundedReadError::NotRegular(kind) => AgFileLoadError::NotRegularFile {
             path: path.to_owned(),
             kind,
-        });
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_AG_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io)?;
-    if bytes.len() as u64 > MAX_AG_FILE_BYTES {
-        return Err(AgFileLoadError::TooLarge {
+        },
+        BoundedReadError::TooLarge { limit } => AgFileLoadError::TooLarge {
             path: path.to_owned(),
-            limit: MAX_AG_FILE_BYTES,
-        });
-    }
-    Ok(bytes)
+            limit,
+        },
+        BoundedReadError::Io(source) => AgFileLoadError::Io {
+            path: path.to_owned(),
+            source,
+        },
+        // Only `read_regular_text` checks UTF-8; bytes are bytes.
+        BoundedReadError::NotUtf8 => AgFileLoadError::Io {
+            path: path.to_owned(),
+            source: std::io::Error::from(std::io::ErrorKind::InvalidData),
+        },
+    })
 }
 
 fn read_grid(r: &mut Reader<'_>, grid: &mut Grid) -> Result<(), AgFileLoadError> {
