@@ -1,13 +1,11 @@
-//! The supervisor's control service: `agp status` and `agp down` ask the running `agp up`
-//! of an instance through iceoryx2 request-response, never through files or signals.
-//! `agp profile` holds a pause lease through it: the supervisor pauses the pipeline until
-//! the lease's deadline, so a profiler that dies leaves it paused no longer than that.
+//! The payloads of the supervisor's control service: `agp status` and `agp down` ask the
+//! running `agp up` of an instance through iceoryx2 request-response, never through files
+//! or signals. `agp profile` holds a pause lease through it: the supervisor pauses the
+//! pipeline until the lease's deadline, so a profiler that dies leaves it paused no longer
+//! than that. The service itself and its client are `agp_runtime`'s.
 
-use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::request_response;
-
-use crate::AgpIpc;
-use crate::instance::Instance;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Most processes a status reply lists.
 pub const MAX_STATUS_PROCESSES: usize = 16;
@@ -259,7 +257,7 @@ pub struct ControlResponse {
     /// Why a request was refused (UTF-8, zero-padded).
     pub message: [u8; STATUS_PATH_LEN],
     /// How the instance's processes wait for messages (`AGP_WAIT`, as
-    /// [`crate::WaitStrategy::name`] writes it), or `mixed` when launch.toml gives its
+    /// `agp_runtime::WaitStrategy::name` writes it), or `mixed` when launch.toml gives its
     /// processes different ones (UTF-8, zero-padded).
     pub waiting: [u8; STATUS_NAME_LEN],
     pub processes: [ProcessStatus; MAX_STATUS_PROCESSES],
@@ -343,136 +341,6 @@ pub fn write_str(field: &mut [u8], s: &str) {
 pub fn read_str(field: &[u8]) -> String {
     let end = field.iter().position(|b| *b == 0).unwrap_or(field.len());
     String::from_utf8_lossy(&field[..end]).into_owned()
-}
-
-/// The control service of an instance.
-pub type ControlService =
-    request_response::PortFactory<AgpIpc, ControlRequest, (), ControlResponse, ()>;
-
-/// Why the control service could not be reached.
-#[derive(Debug, thiserror::Error)]
-pub enum ControlOpenError {
-    #[error("the control service name is invalid")]
-    Name,
-    #[error("cannot create the control service: {0}")]
-    Create(String),
-    #[error("no supervisor answers on instance `{0}`")]
-    NotRunning(String),
-}
-
-const CONTROL_SERVICE: &str = "agp/control";
-
-impl Instance {
-    /// Creates the control service (the supervisor, once per run).
-    pub fn create_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
-        let name: ServiceName = CONTROL_SERVICE
-            .try_into()
-            .map_err(|_| ControlOpenError::Name)?;
-        node.service_builder(&name)
-            .request_response::<ControlRequest, ControlResponse>()
-            .max_clients(8)
-            .max_servers(1)
-            .max_nodes(16)
-            .create()
-            .map_err(|e| ControlOpenError::Create(format!("{e:?}")))
-    }
-
-    /// Whether the supervisor has created the control service, asked without a node: a
-    /// client that made one before the supervisor has cleaned the instance's leftovers
-    /// would be a stranger it must wait for.
-    pub fn control_exists(&self) -> bool {
-        let Ok(name) = ServiceName::new(CONTROL_SERVICE) else {
-            return false;
-        };
-        AgpIpc::does_exist(&name, self.config(), MessagingPattern::RequestResponse).unwrap_or(false)
-    }
-
-    /// Opens the control service of a running supervisor (a client).
-    pub fn open_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
-        let name: ServiceName = CONTROL_SERVICE
-            .try_into()
-            .map_err(|_| ControlOpenError::Name)?;
-        node.service_builder(&name)
-            .request_response::<ControlRequest, ControlResponse>()
-            .open()
-            .map_err(|_| ControlOpenError::NotRunning(self.name().to_owned()))
-    }
-}
-
-/// Why a request got no answer.
-#[derive(Debug, thiserror::Error)]
-pub enum ControlAskError {
-    #[error("cannot create a control client: {0}")]
-    Client(String),
-    #[error("cannot send the request: {0}")]
-    Send(String),
-    #[error("cannot receive the answer: {0}")]
-    Receive(String),
-    #[error("the supervisor did not answer within {0:?}")]
-    Timeout(std::time::Duration),
-    #[error("shutdown requested")]
-    Shutdown,
-}
-
-/// A client of the supervisor's control service.
-pub struct ControlClient {
-    _service: ControlService,
-    client: iceoryx2::port::client::Client<AgpIpc, ControlRequest, (), ControlResponse, ()>,
-}
-
-impl ControlClient {
-    /// Opens the service, retrying for up to `wait` (a supervisor creates it a moment after
-    /// it takes its instance).
-    pub fn open(
-        instance: &Instance,
-        node: &Node<AgpIpc>,
-        wait: std::time::Duration,
-    ) -> Result<Self, ControlOpenError> {
-        let start = std::time::Instant::now();
-        let service = loop {
-            match instance.open_control(node) {
-                Ok(s) => break s,
-                Err(e) if start.elapsed() >= wait => return Err(e),
-                Err(_) => std::thread::sleep(std::time::Duration::from_millis(20)),
-            }
-        };
-        let client = service
-            .client_builder()
-            .create()
-            .map_err(|e| ControlOpenError::Create(format!("{e:?}")))?;
-        Ok(Self {
-            _service: service,
-            client,
-        })
-    }
-
-    /// Sends `request` and waits up to `timeout` for the answer.
-    pub fn ask(
-        &self,
-        request: &ControlRequest,
-        timeout: std::time::Duration,
-    ) -> Result<ControlResponse, ControlAskError> {
-        let pending = self
-            .client
-            .send_copy(*request)
-            .map_err(|e| ControlAskError::Send(format!("{e:?}")))?;
-        let start = std::time::Instant::now();
-        loop {
-            if let Some(response) = pending
-                .receive()
-                .map_err(|e| ControlAskError::Receive(format!("{e:?}")))?
-            {
-                return Ok(*response.payload());
-            }
-            if crate::wait::shutdown_requested() {
-                return Err(ControlAskError::Shutdown);
-            }
-            if start.elapsed() >= timeout {
-                return Err(ControlAskError::Timeout(timeout));
-            }
-            std::thread::sleep(std::time::Duration::from_micros(200));
-        }
-    }
 }
 
 #[cfg(test)]

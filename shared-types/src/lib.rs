@@ -1,4 +1,4 @@
-//! Every payload that crosses a process boundary, and the one place that builds an instance's iceoryx2 config and names its services.
+//! Every payload that crosses a process boundary, and the names of an instance's iceoryx2 services.
 //!
 //! Payloads are `#[repr(C)]`, fixed-size and self-contained (no pointers), so iceoryx2 can
 //! place them in shared memory and every process reads them in place. Each carries a
@@ -6,34 +6,22 @@
 //! alignment when a port connects, and only the version notices a changed layout that
 //! keeps the other two. Change a payload, bump its version.
 //!
+//! This crate holds data and names only: opening the services, waiting and driving are
+//! `agp_runtime`'s. Its one dependency on iceoryx2 is the `ZeroCopySend` derive.
+//!
 //! Units: SI inside (metres, seconds, radians), as in the rest of the code.
 
-pub mod alloc_count;
 mod control;
-mod driver;
-mod instance;
-mod owner_only_storage;
 mod payloads;
-mod service;
-mod wait;
+mod service_names;
 
 pub use control::{
-    ActiveEpoch, ControlAskError, ControlClient, ControlKind, ControlOpenError, ControlRequest,
-    ControlResponse, ControlService, MAX_PAUSE_LEASE, MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS,
-    ProcessState, ProcessStatus, STATUS_NODE_NAME_LEN, SWAP_ARGS_LEN, StrangerStatus, read_str,
-    write_str,
-};
-pub use driver::{DriveError, LockstepDriver};
-pub use instance::{
-    Instance, InstanceDirError, InstanceNameError, MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV,
-    ServiceNames, Topic, instance_files_in,
+    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, MAX_PAUSE_LEASE,
+    MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState, ProcessStatus, STATUS_NODE_NAME_LEN,
+    SWAP_ARGS_LEN, StrangerStatus, read_str, write_str,
 };
 pub use payloads::*;
-pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};
-pub use wait::{
-    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
-    shutdown_requested,
-};
+pub use service_names::ServiceNames;
 
 /// CLOCK_MONOTONIC in nanoseconds: system-wide on Linux, so stamps from different
 /// processes compare.

@@ -1,4 +1,5 @@
-use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Number of IR proximity sensors on the E-puck.
 pub const IR_SENSOR_COUNT: usize = 8;

@@ -6,7 +6,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::Instance;
+use agp_runtime::Instance;
 use agp_world::Scenario;
 use serde_json::Value;
 
@@ -566,7 +566,7 @@ pub fn triangle_learning_launch(instance: &str, trials_per_alpha: u32, env: &str
     )
 }
 
-/// One process's steady-state allocation line (`agp_shared_types::alloc_count::report`).
+/// One process's steady-state allocation line (`agp_runtime::alloc_count::report`).
 #[derive(Debug, Clone, Copy)]
 pub struct AllocCounts {
     /// In the process's loop.

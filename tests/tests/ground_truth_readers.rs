@@ -5,7 +5,7 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use agp_shared_types::{AgpIpc, Instance};
+use agp_runtime::{AgpIpc, Instance};
 use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag};
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node, NodeBuilder};

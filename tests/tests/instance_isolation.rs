@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use agp_shared_types::Instance;
+use agp_runtime::Instance;
 use agp_tests::{AgpUp, Finished, LaunchDir, bin_path, count_instance_files, run_agp};
 
 /// Safety net of every wait; the checks never depend on it.
@@ -35,7 +35,7 @@ fn run_agp_in_base(dir: &Path, base: &Path, args: &[&str]) -> Finished {
     let child = Command::new(bin_path("agp"))
         .args(args)
         .current_dir(dir)
-        .env(agp_shared_types::ROOT_ENV, base)
+        .env(agp_runtime::ROOT_ENV, base)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

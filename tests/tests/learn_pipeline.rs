@@ -13,7 +13,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{GRID_CELLS, GRID_SIDE, GRIDS_PER_ALPHA, GridKind, Instance};
+use agp_runtime::Instance;
+use agp_shared_types::{GRID_CELLS, GRID_SIDE, GRIDS_PER_ALPHA, GridKind};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, triangle_learning_launch};
 use agp_world::{ObjectShape, Scenario};
 

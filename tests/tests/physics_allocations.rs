@@ -8,8 +8,9 @@ use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::alloc_count::WARMUP_MESSAGES;
-use agp_shared_types::{Instance, LockstepDriver, Pose2};
+use agp_runtime::alloc_count::WARMUP_MESSAGES;
+use agp_runtime::{Instance, LockstepDriver};
+use agp_shared_types::Pose2;
 use agp_tests::{AllocCounts, alloc_counts, bin_path};
 
 /// Steps driven; physics counts those after its first `WARMUP_MESSAGES`.

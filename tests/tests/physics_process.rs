@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{GroundTruth, Instance, IrFrame, LockstepDriver, Pose2};
+use agp_runtime::{Instance, LockstepDriver};
+use agp_shared_types::{GroundTruth, IrFrame, Pose2};
 
 /// target/debug (or release) of the running test: the README's test command builds every
 /// binary of the workspace there first.

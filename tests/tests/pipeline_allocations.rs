@@ -1,6 +1,6 @@
 //! No process of the pipeline allocates per message in its steady state: physics,
 //! `agp-estimator` and `agp-planner --mode learn` under `agp up`, each counting its heap
-//! allocations (`AGP_COUNT_ALLOCS=1`, see `agp_shared_types::alloc_count`), over the learning
+//! allocations (`AGP_COUNT_ALLOCS=1`, see `agp_runtime::alloc_count`), over the learning
 //! phase on the triangle: a shape circling and 18 trials, some 150,000 lockstep steps, every
 //! one passing through all three processes.
 //!

@@ -6,7 +6,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{Instance, LockstepDriver, Pose2, stage};
+use agp_runtime::{Instance, LockstepDriver};
+use agp_shared_types::{Pose2, stage};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, run_agp};
 use serde_json::Value;
 

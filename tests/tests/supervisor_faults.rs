@@ -4,11 +4,13 @@
 //! floor. Every test has an instance of its own and checks it leaves no file.
 
 use std::io::{BufRead, BufReader};
+use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{GroundTruth, Instance, MAX_PATH_POINTS, Pose2, Task, TaskKind};
+use agp_runtime::Instance;
+use agp_shared_types::{GroundTruth, MAX_PATH_POINTS, Pose2, Task, TaskKind};
 use agp_tests::{AgpUp, Finished, LaunchDir, bin_path, count_instance_files, run_agp, status_json};
 
 /// Safety net of every wait; the checks never depend on it.
@@ -417,4 +419,79 @@ fn agp_profile_stopped_then_killed_during_the_floor_leaves_the_pipeline_running_
     let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
     assert!(down.status.success(), "{}", down.stderr);
     assert_eq!(count_instance_files(name), 0);
+}
+
+/// Found by the fault campaign (`bench-faults`, seed 100): `agp status` polling a
+/// supervisor that was then killed with -9 kept its node alive, waiting for an answer that
+/// would never come, and the next `agp up` of the instance refused to start ("live
+/// processes not started by a supervisor: node `agp-cli-…`"), leaving the dead one's files.
+#[test]
+fn up_after_a_supervisor_killed_with_9_is_not_refused_for_a_status_client_still_asking_it() {
+    let name = "t-fault-client";
+    let dir = LaunchDir::new(&launch(name, &server("server")));
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines(": ready, pid", 1, TIMEOUT);
+    // A supervisor that cannot answer, then dies while a client waits for its answer.
+    up.signal(libc::SIGSTOP);
+    let status = Command::new(bin_path("agp"))
+        .args(["status", "--instance", name])
+        .current_dir(dir.path())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start agp status");
+    let deadline = Instant::now() + TIMEOUT;
+    while !client_node_alive(name, status.id()) {
+        assert!(Instant::now() < deadline, "agp status made no node");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    up.signal(libc::SIGKILL);
+    let dead = up.wait(TIMEOUT);
+    assert_eq!(dead.status.signal(), Some(libc::SIGKILL));
+
+    // The client gives up on the dead supervisor instead of waiting out its timeout...
+    let asked = finish(status);
+    assert!(!asked.status.success(), "{}", asked.stderr);
+    assert!(
+        asked
+            .stderr
+            .contains("the supervisor died before it answered"),
+        "{}",
+        asked.stderr
+    );
+    // ...and a new `agp up` of the instance cleans what the dead one left and runs.
+    let mut again = AgpUp::start(&dir.launch(), &[]);
+    again.wait_for_lines(": ready, pid", 1, TIMEOUT);
+    let stopped = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    assert!(stopped.status.success(), "{}", stopped.stderr);
+    let run = again.wait(TIMEOUT);
+    assert!(run.status.success(), "{}\n{}", run.stdout, run.stderr);
+    assert!(
+        !run.stderr.contains("not started by a supervisor"),
+        "{}",
+        run.stderr
+    );
+    assert_no_file(name, &run);
+}
+
+/// Whether process `pid` has a live iceoryx2 node in instance `name`.
+fn client_node_alive(name: &str, pid: u32) -> bool {
+    use agp_runtime::AgpIpc;
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
+    let instance = Instance::new(name).expect("valid name");
+    let mut found = false;
+    let _ = Node::<AgpIpc>::list(instance.config(), |state| {
+        if let NodeState::Alive(view) = state
+            && view
+                .details()
+                .as_ref()
+                .is_some_and(|d| i64::from(d.process_id().value()) == i64::from(pid))
+        {
+            found = true;
+        }
+        CallbackProgression::Continue
+    });
+    found
 }

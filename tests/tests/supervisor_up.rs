@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use agp_shared_types::Instance;
+use agp_runtime::Instance;
 use agp_tests::{
     AgpUp, Finished, LaunchDir, count_instance_files, pid_in, process_is_gone, run_agp,
 };

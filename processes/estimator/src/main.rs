@@ -18,10 +18,12 @@ use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
 use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
+use agp_runtime::{
+    AgpIpc, Instance, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
+};
 use agp_shared_types::{
-    AgpIpc, EstimatorLearning, GRID_SIDE, GradientGrid, GridKind, Instance, IrFrame, LearnEvent,
-    LearnEventKind, LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, WaitOutcome,
-    WaitStrategy, Waiter, alloc_count, install_shutdown_handler, monotonic_ns, stage,
+    EstimatorLearning, GRID_SIDE, GradientGrid, GridKind, IrFrame, LearnEvent, LearnEventKind,
+    LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
@@ -63,7 +65,7 @@ struct Args {
 }
 
 /// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
-/// [`agp_shared_types::alloc_count`]): the estimator's per-frame loop allocates none.
+/// [`agp_runtime::alloc_count`]): the estimator's per-frame loop allocates none.
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 

@@ -7,7 +7,7 @@ use agp_physics::{Sim, SimConfig};
 use agp_planner::{
     CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase, PushRoutine, PushSettings,
 };
-use agp_shared_types::alloc_count;
+use agp_runtime::alloc_count;
 use agp_world::{Pose, RobotDescription, Scenario};
 
 #[global_allocator]

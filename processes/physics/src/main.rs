@@ -4,10 +4,13 @@
 use std::time::{Duration, Instant};
 
 use agp_physics::{Sim, SimConfig};
+use agp_runtime::{
+    AgpIpc, Instance, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
+    shutdown_requested,
+};
 use agp_shared_types::{
-    ActiveEpoch, AgpIpc, GroundTruth, Instance, IrFrame, MotorCommand, Pose2, Reset, SessionKey,
-    TimingHeader, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
-    monotonic_ns, shutdown_requested, stage,
+    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, Pose2, Reset, SessionKey, TimingHeader,
+    monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -65,7 +68,7 @@ struct Args {
 }
 
 /// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
-/// [`agp_shared_types::alloc_count`]): physics's steady-state lockstep loop allocates none.
+/// [`agp_runtime::alloc_count`]): physics's steady-state lockstep loop allocates none.
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 

@@ -510,7 +510,7 @@ fn object_pieces(shape: &ObjectShape) -> Result<(Vec<SharedShape>, f64), SimBuil
 #[cfg(test)]
 mod tests {
     use super::*;
-    use agp_shared_types::alloc_count;
+    use agp_runtime::alloc_count;
 
     #[global_allocator]
     static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;

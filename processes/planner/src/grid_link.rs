@@ -4,10 +4,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agp_affordance::{AffordanceGradient, GridSetAssembler};
-use agp_shared_types::{
-    AgpIpc, DriveError, EstimatorLearning, GradientGrid, Instance, ObjectEstimate, WaitOutcome,
-    WaitStrategy, Waiter,
-};
+use agp_runtime::{AgpIpc, DriveError, Instance, WaitOutcome, WaitStrategy, Waiter};
+use agp_shared_types::{EstimatorLearning, GradientGrid, ObjectEstimate};
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::Node;

@@ -30,10 +30,12 @@ use agp_planner::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, ContactSense, PushPhase,
     PushRoutine, PushSettings,
 };
+use agp_runtime::{
+    AgpIpc, DriveError, Instance, LockstepDriver, WaitOutcome, WaitStrategy, Waiter, alloc_count,
+};
 use agp_shared_types::{
-    AgpIpc, DriveError, Instance, IrFrame, LearnEvent, LearnEventKind, LearnReport,
-    LearnReportKind, LockstepDriver, ObjectEstimate, Pose2, WaitOutcome, WaitStrategy, Waiter,
-    alloc_count, monotonic_ns, stage,
+    IrFrame, LearnEvent, LearnEventKind, LearnReport, LearnReportKind, ObjectEstimate, Pose2,
+    monotonic_ns, stage,
 };
 use agp_world::{Pose, RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};

@@ -7,10 +7,11 @@ mod task_mode;
 use std::time::Duration;
 
 use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
-use agp_shared_types::{
-    AgpIpc, ControlClient, ControlKind, ControlRequest, DriveError, Instance, LockstepDriver,
-    Pose2, TaskKind, alloc_count, install_shutdown_handler, monotonic_ns, stage,
+use agp_runtime::control_client::ControlClient;
+use agp_runtime::{
+    AgpIpc, DriveError, Instance, LockstepDriver, alloc_count, install_shutdown_handler,
 };
+use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns, stage};
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
@@ -159,7 +160,7 @@ fn parse_goal(s: &str) -> Result<Pose2, String> {
 }
 
 /// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
-/// [`agp_shared_types::alloc_count`]).
+/// [`agp_runtime::alloc_count`]).
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
@@ -225,7 +226,7 @@ fn run() -> Result<()> {
                     TIMEOUT,
                 );
                 learn_mode::run(&instance, &scenario, args.epoch, &settings)?;
-                if agp_shared_types::shutdown_requested() {
+                if agp_runtime::shutdown_requested() {
                     return Ok(());
                 }
             }
@@ -263,7 +264,7 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
     };
     let mut swap_in = match SwapIn::start(instance, &mut driver) {
         Ok(s) => s,
-        Err(e) if agp_shared_types::shutdown_requested() => {
+        Err(e) if agp_runtime::shutdown_requested() => {
             let _ = e;
             return Ok(());
         }

@@ -23,9 +23,8 @@ use agp_planner::{
     EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
     trajectory_path,
 };
-use agp_shared_types::{
-    AgpIpc, DriveError, Instance, LockstepDriver, MAX_PATH_POINTS, Pose2, TaskKind, stage,
-};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
+use agp_shared_types::{MAX_PATH_POINTS, Pose2, TaskKind, stage};
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use glam::DVec2;
@@ -136,7 +135,7 @@ pub fn run(
         let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
         match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
             Ok(g) => Some(g),
-            Err(e) if agp_shared_types::shutdown_requested() => {
+            Err(e) if agp_runtime::shutdown_requested() => {
                 let _ = e;
                 return Ok(None);
             }
@@ -163,7 +162,7 @@ pub fn run(
     let _task = publish_task(instance, scenario, &settings.task)?;
     let swap_in = match SwapIn::start(instance, &mut driver) {
         Ok(s) => s,
-        Err(e) if agp_shared_types::shutdown_requested() => {
+        Err(e) if agp_runtime::shutdown_requested() => {
             let _ = e;
             return Ok(None);
         }

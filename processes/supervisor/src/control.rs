@@ -1,22 +1,14 @@
-//! The client side of the control service: `agp status`, `agp down` and the wait of
-//! `agp up --detach`, talking to the running supervisor through iceoryx2.
+//! The CLI's side of the control service: `agp status`, `agp down` and the wait of
+//! `agp up --detach`; the requests themselves go through `agp_runtime::control_client`.
 
-use std::fs::TryLockError;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{
-    ControlClient, ControlKind, ControlRequest, ControlResponse, Instance, ProcessState, read_str,
-};
+use agp_runtime::{Instance, InstanceLock, control_client};
+use agp_shared_types::{ControlKind, ControlResponse, ProcessState, read_str};
 use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
-
-use crate::instance_lock::InstanceLock;
-
-/// How long a client waits for the supervisor's answer (a safety net: it answers within
-/// its 10 ms poll).
-const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// How long the children of a dead supervisor may take to die before `agp down` names
 /// them and refuses to clean.
@@ -41,47 +33,6 @@ pub fn instance_name(instance: Option<&str>, launch: &Path) -> Result<String> {
     };
     let config = LaunchConfig::load(launch, &options).map_err(|e| anyhow!("{e}"))?;
     Ok(config.instance)
-}
-
-/// Whether a supervisor holds the instance's lock (it is up, or starting, or stopping).
-///
-/// The lock is opened as the supervisor opens it: not through a link, only a regular file
-/// of this user; anything else is no supervisor's.
-pub fn is_up(instance: &Instance) -> bool {
-    let Ok(file) = crate::instance_lock::open_lock(&InstanceLock::path_of(instance), false) else {
-        return false;
-    };
-    match file.try_lock_shared() {
-        Ok(()) => {
-            let _ = file.unlock();
-            false
-        }
-        Err(TryLockError::WouldBlock) => true,
-        Err(TryLockError::Error(_)) => false,
-    }
-}
-
-/// Sends one request to the instance's supervisor and returns its answer.
-pub fn ask(name: &str, kind: ControlKind) -> Result<ControlResponse> {
-    ask_with(name, ControlRequest::new(kind), ANSWER_TIMEOUT)
-}
-
-/// Sends `request` and waits up to `timeout` for the answer.
-pub fn ask_with(name: &str, request: ControlRequest, timeout: Duration) -> Result<ControlResponse> {
-    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
-    if !is_up(&instance) {
-        bail!("instance `{name}` is not up (no supervisor holds it)");
-    }
-    // Until then the supervisor is still starting (it may be cleaning what a previous run
-    // left): a node of ours would be a stranger in its way.
-    if !instance.control_exists() {
-        bail!("instance `{name}` is starting: its supervisor does not answer yet");
-    }
-    let node = instance
-        .node(&format!("agp-cli-{}", std::process::id()), false)
-        .map_err(|e| anyhow!("cannot create an iceoryx2 node on instance `{name}`: {e:?}"))?;
-    let client = ControlClient::open(&instance, &node, ANSWER_TIMEOUT)?;
-    Ok(client.ask(&request, timeout)?)
 }
 
 /// One process of `agp status --json`.
@@ -238,15 +189,15 @@ pub enum DownOutcome {
 /// names them and refuses.
 pub fn down(name: &str, timeout: Duration) -> Result<DownOutcome> {
     let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
-    if !is_up(&instance) && !instance.files().is_empty() {
+    if !InstanceLock::is_held(&instance) && !instance.files().is_empty() {
         return clean_dead(&instance);
     }
-    let r = ask(name, ControlKind::Down)?;
+    let r = control_client::ask(name, ControlKind::Down)?;
     if r.ok == 0 {
         bail!("the supervisor of instance `{name}` refused to stop");
     }
     let deadline = Instant::now() + timeout;
-    while is_up(&instance) {
+    while InstanceLock::is_held(&instance) {
         if Instant::now() >= deadline {
             bail!(
                 "the supervisor of instance `{name}` (pid {}) is still stopping after {timeout:?}",

@@ -21,10 +21,11 @@ use std::path::PathBuf;
 use std::process::Child;
 use std::time::{Duration, Instant};
 
+use agp_runtime::control_client::is_client_node;
+use agp_runtime::{AgpIpc, ControlService, Instance, Topic};
 use agp_shared_types::{
-    ActiveEpoch, AgpIpc, ControlKind, ControlRequest, ControlResponse, ControlService, Instance,
-    MAX_PAUSE_LEASE, MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState, Topic, read_str,
-    write_str,
+    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, MAX_PAUSE_LEASE,
+    MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState, read_str, write_str,
 };
 use anyhow::{Result, anyhow};
 use iceoryx2::active_request::ActiveRequest;
@@ -676,7 +677,7 @@ fn strangers(instance: &Instance, ours: &[u32]) -> Vec<(String, u32)> {
                 Some(d) => {
                     let name = d.name().as_str().to_owned();
                     let pid = u32::try_from(d.process_id().value()).unwrap_or(0);
-                    if pid != me && !belongs_to(pid, ours) && !is_client(&name, pid) {
+                    if pid != me && !belongs_to(pid, ours) && !is_client_node(&name, pid) {
                         found.push((name, pid));
                     }
                 }
@@ -700,27 +701,6 @@ fn belongs_to(pid: u32, ours: &[u32]) -> bool {
     // SAFETY: getpgid(2) reads the process group of a pid; no memory is involved.
     let group = unsafe { libc::getpgid(p) };
     group > 0 && u32::try_from(group).is_ok_and(|g| ours.contains(&g))
-}
-
-/// Whether node `name` of process `pid` is an `agp` client's.
-fn is_client(name: &str, pid: u32) -> bool {
-    let own_name = ["agp-cli-", "agp-profile-"]
-        .iter()
-        .any(|p| name.strip_prefix(p) == Some(pid.to_string().as_str()));
-    if !own_name {
-        return false;
-    }
-    let Ok(exe) = std::fs::read_link(format!("/proc/{pid}/exe")) else {
-        return false;
-    };
-    // A rebuilt `agp` still running shows as `agp (deleted)`.
-    exe.file_name()
-        .map(|n| {
-            n.to_string_lossy()
-                .trim_end_matches(" (deleted)")
-                .to_owned()
-        })
-        .is_some_and(|n| n == "agp")
 }
 
 /// Each process's state into a status reply.
@@ -793,8 +773,8 @@ mod tests {
     fn a_node_named_like_a_client_is_a_stranger_unless_an_agp_with_that_pid_made_it() {
         let me = std::process::id();
         // The test executable is not `agp`.
-        assert!(!is_client(&format!("agp-cli-{me}"), me));
-        assert!(!is_client("agp-cli-1", me));
-        assert!(!is_client("intruder", me));
+        assert!(!is_client_node(&format!("agp-cli-{me}"), me));
+        assert!(!is_client_node("agp-cli-1", me));
+        assert!(!is_client_node("intruder", me));
     }
 }

@@ -11,7 +11,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use agp_planner::{EpisodeConfig, Evaluation, PoseSample, Task, distance_to_path};
-use agp_shared_types::{AgpIpc, GroundTruth, Instance, TaskKind};
+use agp_runtime::{AgpIpc, Instance};
+use agp_shared_types::{GroundTruth, TaskKind};
 use agp_world::Scenario;
 use anyhow::{Result, anyhow, bail};
 use glam::DVec2;

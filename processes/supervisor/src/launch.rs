@@ -33,7 +33,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use agp_shared_types::{Instance, InstanceNameError, ROOT_ENV, WaitStrategy};
+use agp_runtime::{Instance, InstanceNameError, ROOT_ENV, WaitStrategy};
 use serde::Deserialize;
 use toml::Spanned;
 

@@ -7,7 +7,6 @@ mod children;
 mod control;
 mod control_plane;
 mod evaluation;
-mod instance_lock;
 mod pipeline_bench;
 mod probe;
 mod profile;
@@ -18,6 +17,7 @@ mod up;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use agp_runtime::{InstanceLock, control_client};
 use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -247,7 +247,7 @@ fn main() -> ExitCode {
 
 fn up(args: &UpArgs) -> Result<u8> {
     // Every child inherits it: a value that names no strategy is refused here, not guessed.
-    if let Err(why) = agp_shared_types::WaitStrategy::from_env_checked() {
+    if let Err(why) = agp_runtime::WaitStrategy::from_env_checked() {
         up::warn(format_args!("agp: error: {why}"));
         up::warn(format_args!("agp: nothing was started"));
         return Ok(up::exit::INVALID);
@@ -282,10 +282,10 @@ const DETACHED_ENV: &str = "AGP_DETACHED";
 /// of the supervisor it started (its pid) counts as started.
 fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
     use std::os::unix::process::CommandExt;
-    let instance = agp_shared_types::Instance::new(&config.instance)
+    let instance = agp_runtime::Instance::new(&config.instance)
         .map_err(|e| anyhow::anyhow!("bad instance name `{}`: {e}", config.instance))?;
     // Whoever holds the lock is named by it; released at once when no one does.
-    drop(instance_lock::InstanceLock::acquire(&instance)?);
+    drop(InstanceLock::acquire(&instance)?);
     std::fs::create_dir_all(&config.results).with_context(|| {
         format!(
             "cannot create the results folder {}",
@@ -332,7 +332,8 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
                 log_path.display()
             );
         }
-        if let Ok(r) = control::ask(&config.instance, agp_shared_types::ControlKind::Status) {
+        if let Ok(r) = control_client::ask(&config.instance, agp_shared_types::ControlKind::Status)
+        {
             let report = control::StatusReport::new(&config.instance, &r);
             if report.supervisor_pid != child.id() {
                 anyhow::bail!(
@@ -366,7 +367,7 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
 
 fn status(args: &StatusArgs) -> Result<u8> {
     let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
-    let r = control::ask(&name, agp_shared_types::ControlKind::Status)?;
+    let r = control_client::ask(&name, agp_shared_types::ControlKind::Status)?;
     let report = control::StatusReport::new(&name, &r);
     if args.json {
         println!(
@@ -465,7 +466,7 @@ fn swap_once(args: &SwapArgs, name: &str, exec: Option<&std::path::Path>) -> Res
     let timeout = std::time::Duration::from_secs_f64(args.timeout_s);
     request.value_ns = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
     // The answer comes when the swap ends: ready, then driving, each within the timeout.
-    let r = control::ask_with(
+    let r = control_client::ask_with(
         name,
         request,
         timeout * 2 + std::time::Duration::from_secs(5),
@@ -506,7 +507,7 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
     const LOOK: Duration = Duration::from_millis(100);
     const SETTLE: Duration = Duration::from_millis(300);
     signals::install().context("cannot install the signal handlers")?;
-    let instance = agp_shared_types::Instance::new(name)
+    let instance = agp_runtime::Instance::new(name)
         .map_err(|e| anyhow::anyhow!("bad instance name `{name}`: {e}"))?;
     if file_stamp(path).is_none() {
         anyhow::bail!("--watch {}: no such file", path.display());
@@ -527,7 +528,7 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
             ));
             return Ok(0);
         }
-        if !control::is_up(&instance) {
+        if !InstanceLock::is_held(&instance) {
             up::warn(format_args!(
                 "agp: instance `{name}` is down: watch ends ({swaps} swaps, {refused} refused)"
             ));

@@ -10,7 +10,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_planner::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
-use agp_shared_types::{AgpIpc, DriveError, Instance, LockstepDriver, Pose2};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
+use agp_shared_types::Pose2;
 use agp_world::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::prelude::Node;
@@ -157,7 +158,7 @@ impl PipelineBench {
             if let Some(status) = child.try_wait()? {
                 break status;
             }
-            if agp_shared_types::shutdown_requested() {
+            if agp_runtime::shutdown_requested() {
                 child.stop(Duration::from_secs(2))?;
                 bail!("interrupted");
             }

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use agp_shared_types::{DriveError, Instance, LockstepDriver, Pose2, install_shutdown_handler};
+use agp_runtime::{DriveError, Instance, LockstepDriver, install_shutdown_handler};
+use agp_shared_types::Pose2;
 use agp_world::{RobotDescription, Scenario, wrap_angle};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;

@@ -38,10 +38,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use agp_runtime::control_client::ControlClient;
+use agp_runtime::{
+    AgpIpc, Instance, InstanceLock, WaitOutcome, WaitStrategy, Waiter, control_client,
+    install_shutdown_handler, shutdown_requested,
+};
 use agp_shared_types::{
-    AgpIpc, ControlClient, ControlKind, ControlRequest, Instance, IrFrame, TimingHeader,
-    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, monotonic_ns, read_str,
-    shutdown_requested, stage,
+    ControlKind, ControlRequest, IrFrame, TimingHeader, monotonic_ns, read_str, stage,
 };
 use anyhow::{Context, Result, anyhow, bail};
 use hdrhistogram::Histogram;
@@ -482,7 +485,7 @@ impl FloorPorts {
                 .map_err(|e| anyhow!("bad service name `{name}`: {e:?}"))?;
             node.service_builder(&service)
                 .event()
-                .event_id_max_value(agp_shared_types::EVENT_ID_MAX_VALUE)
+                .event_id_max_value(agp_runtime::EVENT_ID_MAX_VALUE)
                 .max_notifiers(2)
                 .max_listeners(2)
                 .open_or_create()
@@ -692,7 +695,7 @@ fn process_exists(pid: u32) -> bool {
 /// How the processes of instance `name` wait, as its supervisor reports it: the floor must
 /// wait the same way. An `AGP_WAIT` of the caller's that differs is said and not used.
 fn pipeline_waiting(name: &str) -> Result<WaitStrategy> {
-    let r = control::ask(name, agp_shared_types::ControlKind::Status)?;
+    let r = control_client::ask(name, agp_shared_types::ControlKind::Status)?;
     let reported = control::StatusReport::new(name, &r).waiting;
     let Some(waiting) = WaitStrategy::parse(&reported) else {
         bail!(
@@ -852,7 +855,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
     }
     let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
     let instance = Instance::new(&name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
-    if !control::is_up(&instance) {
+    if !InstanceLock::is_held(&instance) {
         bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");
     }
     install_shutdown_handler();

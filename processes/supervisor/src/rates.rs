@@ -4,7 +4,8 @@
 
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{AgpIpc, Instance, IrFrame, MotorCommand};
+use agp_runtime::{AgpIpc, Instance};
+use agp_shared_types::{IrFrame, MotorCommand};
 use anyhow::{Result, anyhow};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::Node;

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+use agp_runtime::control_client::is_client_node;
+use agp_runtime::{AgpIpc, Instance, InstanceLock, Topic, WaitStrategy};
 use agp_shared_types::{
-    AgpIpc, GradientGrid, GroundTruth, Instance, IrFrame, MotorCommand, ObjectEstimate, Reset,
-    Task, Topic, WaitStrategy,
+    GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
 };
 use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use anyhow::{Context, Result, anyhow};
@@ -20,7 +21,6 @@ use agp_world::Scenario;
 
 use crate::control_plane::ControlPlane;
 use crate::evaluation::{self, RunJudge};
-use crate::instance_lock::InstanceLock;
 use crate::signals;
 
 /// How often the supervisor looks at its children and its signal flags.
@@ -391,10 +391,17 @@ pub(crate) fn alive_nodes(instance: &Instance) -> Vec<String> {
     let mut alive = Vec::new();
     let listed = Node::<AgpIpc>::list(instance.config(), |state| {
         if let NodeState::Alive(view) = state {
-            alive.push(match view.details() {
-                Some(d) => format!("node `{}` (pid {})", d.name(), d.process_id()),
-                None => "a node".to_owned(),
-            });
+            match view.details() {
+                // A client of the dead supervisor (`agp status` polling it) holds nothing
+                // the run needs, and gives up its request once it sees the supervisor gone.
+                Some(d)
+                    if is_client_node(
+                        d.name().as_str(),
+                        u32::try_from(d.process_id().value()).unwrap_or(0),
+                    ) => {}
+                Some(d) => alive.push(format!("node `{}` (pid {})", d.name(), d.process_id())),
+                None => alive.push("a node".to_owned()),
+            }
         }
         CallbackProgression::Continue
     });

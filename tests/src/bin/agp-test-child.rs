@@ -15,7 +15,7 @@ use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use agp_shared_types::Instance;
+use agp_runtime::Instance;
 
 enum Mode {
     ExitAfter { ms: u64, status: i32 },

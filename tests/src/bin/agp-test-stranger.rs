@@ -14,7 +14,8 @@
 
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{Instance, MotorCommand, Reset};
+use agp_runtime::Instance;
+use agp_shared_types::{MotorCommand, Reset};
 
 /// The trace id and reset seq of everything the stranger sends.
 const MARK: u64 = 0x5354_5241_4e47_4552;

@@ -23,7 +23,8 @@ use std::mem::MaybeUninit;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{monotonic_ns, shutdown_requested};
+use agp_runtime::shutdown_requested;
+use agp_shared_types::monotonic_ns;
 use hdrhistogram::Histogram;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -51,7 +52,7 @@ pub enum Strategy {
     /// Spin for [`WaitConfig::spin_budget`], then block as [`Strategy::Waitset`] does.
     SpinThenBlock,
     /// Like [`Strategy::Waitset`] but blocks in `Listener::timed_wait` directly, as
-    /// `agp_shared_types::Waiter` does. Not in [`Strategy::DEFAULT_SET`].
+    /// `agp_runtime::Waiter` does. Not in [`Strategy::DEFAULT_SET`].
     Listener,
 }
 
@@ -164,7 +165,7 @@ pub enum HopError {
     Stalled { waited: Duration },
     /// The peer process is gone.
     PeerGone,
-    /// SIGINT or SIGTERM arrived (see `agp_shared_types::install_shutdown_handler`).
+    /// SIGINT or SIGTERM arrived (see `agp_runtime::install_shutdown_handler`).
     Shutdown,
 }
 

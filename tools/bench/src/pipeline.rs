@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_shared_types::{Instance, shutdown_requested};
+use agp_runtime::{Instance, shutdown_requested};
 use anyhow::{Context, Result, anyhow, bail};
 use serde_json::Value;
 

@@ -10,7 +10,7 @@ use agp_bench::hop::{
     HopPorts, HopSmall, Side, Strategy, WaitConfig, new_histogram, ping_loop, pong_loop,
     service_stem,
 };
-use agp_shared_types::{Instance, alloc_count};
+use agp_runtime::{Instance, alloc_count};
 
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;

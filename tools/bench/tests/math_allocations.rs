@@ -8,7 +8,8 @@ use agp_bench::math::{
     start_radius_m,
 };
 use agp_planner::{PushChoiceSettings, PushPlanner};
-use agp_shared_types::{Pose2, alloc_count};
+use agp_runtime::alloc_count;
+use agp_shared_types::Pose2;
 use agp_world::{Rng, RobotDescription, Scenario};
 
 #[global_allocator]

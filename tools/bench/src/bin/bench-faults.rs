@@ -34,7 +34,7 @@ use agp_bench::pipeline::{
     Bins, LaunchSpec, Phase, Session, Status, StepCounter, instance_files, is_interrupt,
     last_line_with, reap_children, signal, sleep_checked, step_log_path,
 };
-use agp_shared_types::install_shutdown_handler;
+use agp_runtime::install_shutdown_handler;
 use agp_world::Rng;
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;

@@ -18,7 +18,7 @@ use agp_bench::hop::{
     HOP_GRID_BYTES, HopError, HopGrid, HopPayload, HopPorts, HopSmall, Side, Strategy, Summary,
     WaitConfig, format_table, new_histogram, ping_loop, pong_loop, service_stem,
 };
-use agp_shared_types::{Instance, install_shutdown_handler};
+use agp_runtime::{Instance, install_shutdown_handler};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use iceoryx2::prelude::ipc;

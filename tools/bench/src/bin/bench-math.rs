@@ -19,7 +19,8 @@ use agp_bench::math::{
     reference_plan_over, reference_smooth, smoothing_disagreement, start_radius_m,
 };
 use agp_planner::{PushChoiceSettings, PushPlanner};
-use agp_shared_types::{Pose2, alloc_count};
+use agp_runtime::alloc_count;
+use agp_shared_types::Pose2;
 use agp_world::{Rng, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::Parser;

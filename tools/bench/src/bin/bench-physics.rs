@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use agp_physics::{Sim, SimConfig};
-use agp_shared_types::alloc_count;
+use agp_runtime::alloc_count;
 use agp_world::{BUILTIN_NAMES, Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::Parser;

@@ -25,7 +25,7 @@ use agp_bench::pipeline::{
     Bins, LaunchSpec, Phase, Session, instance_files, is_interrupt, last_line_with, rss_kb,
     shm_file_count, sleep_checked,
 };
-use agp_shared_types::install_shutdown_handler;
+use agp_runtime::install_shutdown_handler;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use serde_json::{Value, json};

@@ -1,3 +1,5 @@
+//! The one place that builds an instance's iceoryx2 config and opens its services, under the names of `agp_shared_types::ServiceNames`.
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -8,11 +10,14 @@ use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use crate::AgpIpc;
-use crate::payloads::{
-    GradientGrid, GroundTruth, IrFrame, LearnEvent, LearnReport, MotorCommand, ObjectEstimate,
-    Reset, Task,
+use agp_shared_types::{
+    ActiveEpoch, ControlRequest, ControlResponse, GRIDS_PER_ALPHA, GradientGrid, GroundTruth,
+    IrFrame, LearnEvent, LearnReport, MAX_GRID_ALPHAS, MotorCommand, ObjectEstimate, Reset,
+    ServiceNames, Task,
 };
+use iceoryx2::service::port_factory::request_response;
+
+use crate::AgpIpc;
 
 /// Longest instance name: root path plus prefix must stay under about 60 characters, since
 /// iceoryx2 derives Unix socket paths from them.
@@ -114,30 +119,6 @@ fn secure_dir(path: &Path) -> Result<(), InstanceDirError> {
             .map_err(io)?;
     }
     Ok(())
-}
-
-/// Names of the services of one instance. Every topic is paired with an event service its
-/// publisher notifies after each send, so a reader can block instead of polling. Topics
-/// read by the same waiting loop share one event service: physics waits on
-/// [`ServiceNames::PHYSICS_INBOX`] for both motor commands and resets.
-pub struct ServiceNames;
-
-impl ServiceNames {
-    pub const IR_FRAMES: &'static str = "agp/ir_frames";
-    pub const GROUND_TRUTH: &'static str = "agp/ground_truth";
-    pub const MOTOR_COMMANDS: &'static str = "agp/motor_commands";
-    pub const RESETS: &'static str = "agp/resets";
-    pub const ESTIMATES: &'static str = "agp/estimates";
-    pub const GRIDS: &'static str = "agp/grids";
-    pub const TASK: &'static str = "agp/task";
-    pub const ACTIVE_EPOCH: &'static str = "agp/active_epoch";
-    /// The event service physics blocks on: notified after a motor command or a reset.
-    pub const PHYSICS_INBOX: &'static str = "agp/physics_inbox.ev";
-
-    /// The event service paired with a topic.
-    pub fn event_of(topic: &str) -> String {
-        format!("{topic}.ev")
-    }
 }
 
 /// One running pipeline's iceoryx2 world: its name, its explicit config (prefix and root
@@ -385,10 +366,7 @@ impl Instance {
 impl Instance {
     /// The active planner epoch (published by the supervisor, read by physics; a change
     /// wakes physics through its inbox).
-    pub fn active_epoch(
-        &self,
-        node: &Node<AgpIpc>,
-    ) -> Result<Topic<crate::control::ActiveEpoch>, OpenError> {
+    pub fn active_epoch(&self, node: &Node<AgpIpc>) -> Result<Topic<ActiveEpoch>, OpenError> {
         Topic::open(
             node,
             ServiceNames::ACTIVE_EPOCH,
@@ -396,15 +374,6 @@ impl Instance {
             Qos::epoch(),
         )
     }
-}
-
-impl ServiceNames {
-    /// Learning-protocol steps (planner to estimator) and test-push requests (benchmark to
-    /// planner). Its publishers notify [`ServiceNames::IR_FRAMES`]'s event service, so the
-    /// estimator, which waits for frames, wakes for both with one listener.
-    pub const LEARN_EVENTS: &'static str = "agp/learn_events";
-    /// The estimator's account of learning and its predictions of test pushes.
-    pub const LEARN_REPORTS: &'static str = "agp/learn_reports";
 }
 
 impl Instance {
@@ -502,8 +471,8 @@ impl Qos {
         }
     }
 
-    /// Gradient grids: a whole set ([`crate::GRIDS_PER_ALPHA`] grids for each of up to
-    /// [`crate::MAX_GRID_ALPHAS`] alphas: 88 grids of 65,624 bytes, 5.8 MB) kept in history,
+    /// Gradient grids: a whole set ([`GRIDS_PER_ALPHA`] grids for each of up to
+    /// [`MAX_GRID_ALPHAS`] alphas: 88 grids of 65,624 bytes, 5.8 MB) kept in history,
     /// so a late or restarted reader gets all of it, and fitting each reader's buffer, so a
     /// reader that drains only after the publication loses none.
     ///
@@ -511,7 +480,7 @@ impl Qos {
     /// loaned` samples: 450 grids, about 30 MB of shared memory. Subscribers: the planner,
     /// a hot-swapped one beside it, and one tool or test.
     fn grids() -> Self {
-        let set = crate::GRIDS_PER_ALPHA * crate::MAX_GRID_ALPHAS;
+        let set = GRIDS_PER_ALPHA * MAX_GRID_ALPHAS;
         Self {
             history: set,
             buffer: set,
@@ -641,4 +610,56 @@ fn is_transient_ev(e: &EventOpenOrCreateError) -> bool {
                 O::ServiceInCorruptedState | O::IsMarkedForDestruction | O::HangsInCreation
             )
     )
+}
+
+/// The control service of an instance.
+pub type ControlService =
+    request_response::PortFactory<AgpIpc, ControlRequest, (), ControlResponse, ()>;
+
+/// Why the control service could not be reached.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlOpenError {
+    #[error("the control service name is invalid")]
+    Name,
+    #[error("cannot create the control service: {0}")]
+    Create(String),
+    #[error("no supervisor answers on instance `{0}`")]
+    NotRunning(String),
+}
+
+impl Instance {
+    /// Creates the control service (the supervisor, once per run).
+    pub fn create_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
+        let name: ServiceName = ServiceNames::CONTROL
+            .try_into()
+            .map_err(|_| ControlOpenError::Name)?;
+        node.service_builder(&name)
+            .request_response::<ControlRequest, ControlResponse>()
+            .max_clients(8)
+            .max_servers(1)
+            .max_nodes(16)
+            .create()
+            .map_err(|e| ControlOpenError::Create(format!("{e:?}")))
+    }
+
+    /// Whether the supervisor has created the control service, asked without a node: a
+    /// client that made one before the supervisor has cleaned the instance's leftovers
+    /// would be a stranger it must wait for.
+    pub fn control_exists(&self) -> bool {
+        let Ok(name) = ServiceName::new(ServiceNames::CONTROL) else {
+            return false;
+        };
+        AgpIpc::does_exist(&name, self.config(), MessagingPattern::RequestResponse).unwrap_or(false)
+    }
+
+    /// Opens the control service of a running supervisor (a client).
+    pub fn open_control(&self, node: &Node<AgpIpc>) -> Result<ControlService, ControlOpenError> {
+        let name: ServiceName = ServiceNames::CONTROL
+            .try_into()
+            .map_err(|_| ControlOpenError::Name)?;
+        node.service_builder(&name)
+            .request_response::<ControlRequest, ControlResponse>()
+            .open()
+            .map_err(|_| ControlOpenError::NotRunning(self.name().to_owned()))
+    }
 }

@@ -4,7 +4,7 @@
 //! A process binary installs it and turns it on first thing:
 //!
 //! ```
-//! use agp_shared_types::alloc_count;
+//! use agp_runtime::alloc_count;
 //!
 //! #[global_allocator]
 //! static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;

@@ -10,7 +10,7 @@ use std::io::{Read, Write};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use agp_shared_types::{Instance, InstanceDirError};
+use crate::instance::{Instance, InstanceDirError};
 
 /// Held while a supervisor owns its instance; released (and the file removed) on drop. The
 /// kernel releases the lock when the supervisor dies, however it dies.
@@ -56,6 +56,36 @@ impl InstanceLock {
         root.parent()
             .unwrap_or_else(|| Path::new("/"))
             .join(format!("{}.lock", instance.name()))
+    }
+
+    /// Whether a supervisor holds the lock of `instance` (it is up, or starting, or
+    /// stopping).
+    ///
+    /// The lock is opened as the supervisor opens it: not through a link, only a regular
+    /// file of this user; anything else is no supervisor's.
+    pub fn is_held(instance: &Instance) -> bool {
+        let Ok(file) = open_lock(&Self::path_of(instance), false) else {
+            return false;
+        };
+        match file.try_lock_shared() {
+            Ok(()) => {
+                let _ = file.unlock();
+                false
+            }
+            Err(TryLockError::WouldBlock) => true,
+            Err(TryLockError::Error(_)) => false,
+        }
+    }
+
+    /// The pid the supervisor holding `instance` wrote into its lock, if one holds it.
+    pub fn holder_pid(instance: &Instance) -> Option<u32> {
+        if !Self::is_held(instance) {
+            return None;
+        }
+        let mut file = open_lock(&Self::path_of(instance), false).ok()?;
+        let mut text = String::new();
+        file.read_to_string(&mut text).ok()?;
+        text.trim().parse().ok()
     }
 
     /// Locks `instance` for this process, or says which supervisor holds it.
@@ -104,7 +134,7 @@ impl InstanceLock {
 
 /// Opens the lock file at `path` (created mode 0600 if `create`) without following a link
 /// and without blocking on a FIFO, and checks it is a regular file of this user.
-pub(crate) fn open_lock(path: &Path, create: bool) -> Result<File, InstanceLockError> {
+fn open_lock(path: &Path, create: bool) -> Result<File, InstanceLockError> {
     let refuse = |why: &str| InstanceLockError::Unsafe {
         path: path.to_path_buf(),
         why: why.to_owned(),

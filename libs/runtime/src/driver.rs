@@ -5,13 +5,14 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::Node;
 
-use crate::control::ActiveEpoch;
-use crate::instance::Instance;
-use crate::payloads::{
-    GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset, session_token_from_env,
+use agp_shared_types::{
+    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Pose2, Reset, monotonic_ns,
+    session_token_from_env, stage,
 };
+
+use crate::AgpIpc;
+use crate::instance::Instance;
 use crate::wait::{WaitOutcome, WaitStrategy, Waiter};
-use crate::{AgpIpc, monotonic_ns, stage};
 
 /// Why driving physics failed.
 #[derive(Debug, thiserror::Error)]
@@ -49,7 +50,7 @@ pub enum DriveError {
 /// no estimator or planner may be.
 ///
 /// Every command and reset carries the token the supervisor handed this process in
-/// `AGP_TOKEN` ([`crate::SessionKey::token`] of its epoch; 0 without one): a physics the
+/// `AGP_TOKEN` ([`agp_shared_types::SessionKey::token`] of its epoch; 0 without one): a physics the
 /// supervisor started applies nothing else. A physics started without a session key (by
 /// hand, by the probe or a benchmark's private pipeline) takes every command.
 pub struct LockstepDriver {

@@ -144,7 +144,7 @@ pub enum WaitOutcome<T> {
 /// the timeout it is given, and returns at once when shutdown is requested.
 ///
 /// Blocking is a `sem_wait` on the listener's futex (see `service.rs`), which has no
-/// timeout of its own: a timer of this thread ([`DeadlineTimer`]) sends it a signal at the
+/// timeout of its own: a timer of this thread (`DeadlineTimer`) sends it a signal at the
 /// end of each block, and that signal is unblocked only while the thread sits in `sem_wait`,
 /// so it never interrupts anything else.
 pub struct Waiter {

@@ -1,0 +1,25 @@
+//! The iceoryx2 runtime every agp process shares: the service type, an instance's config and services, waiting, the lockstep driver, the control client and the allocation counter.
+//!
+//! Payloads and service names are `agp_shared_types`'s; this crate opens the services under
+//! those names, with one quality of service per topic, for every process of an instance.
+
+pub mod alloc_count;
+pub mod control_client;
+mod driver;
+mod instance;
+mod instance_lock;
+mod owner_only_storage;
+mod service;
+mod wait;
+
+pub use driver::{DriveError, LockstepDriver};
+pub use instance::{
+    ControlOpenError, ControlService, Instance, InstanceDirError, InstanceNameError,
+    MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, Topic, instance_files_in,
+};
+pub use instance_lock::{InstanceLock, InstanceLockError};
+pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};
+pub use wait::{
+    WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
+    shutdown_requested,
+};
