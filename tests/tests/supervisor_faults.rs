@@ -5,13 +5,14 @@
 
 use std::io::{BufRead, BufReader};
 use std::os::unix::process::ExitStatusExt;
-use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_runtime::Instance;
 use agp_shared_types::{GroundTruth, MAX_PATH_POINTS, Pose2, Task, TaskKind};
-use agp_tests::{AgpUp, Finished, LaunchDir, bin_path, count_instance_files, run_agp, status_json};
+use agp_tests::{
+    AgpUp, DownOnPanic, Finished, LaunchDir, bin_path, count_instance_files, run_agp, status_json,
+};
 
 /// Safety net of every wait; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(60);
@@ -330,20 +331,6 @@ fn until(what: &str, mut ok: impl FnMut() -> bool) {
     }
 }
 
-/// Brings the instance down if a failed assertion left it up.
-struct Down<'a> {
-    dir: &'a Path,
-    name: &'a str,
-}
-
-impl Drop for Down<'_> {
-    fn drop(&mut self) {
-        if count_instance_files(self.name) > 0 {
-            let _ = run_agp(self.dir, &["down", "--instance", self.name], TIMEOUT);
-        }
-    }
-}
-
 #[test]
 fn agp_profile_stopped_then_killed_during_the_floor_leaves_the_pipeline_running_and_no_floor_file()
 {
@@ -351,10 +338,7 @@ fn agp_profile_stopped_then_killed_during_the_floor_leaves_the_pipeline_running_
     let dir = LaunchDir::new(&pipeline(name));
     let up = run_agp(dir.path(), &["up", "--detach"], TIMEOUT);
     assert!(up.status.success(), "{}{}", up.stdout, up.stderr);
-    let _down = Down {
-        dir: dir.path(),
-        name,
-    };
+    let _down = DownOnPanic::new(dir.path(), name);
     let status = status_json(dir.path(), name, TIMEOUT);
     let pids: Vec<u64> = status["processes"]
         .as_array()
