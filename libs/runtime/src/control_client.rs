@@ -79,8 +79,10 @@ pub fn ask_with(
     let client = ControlClient::open(&instance, &node, ANSWER_TIMEOUT)?;
     // A supervisor killed while we wait never answers: stop waiting when it is gone, so
     // no client of a dead supervisor lingers in the way of the next `agp up`.
-    let supervisor = InstanceLock::holder_pid(&instance);
-    let alive = || supervisor.is_none_or(process_alive);
+    let Some(supervisor) = InstanceLock::holder_pid(&instance) else {
+        return Err(InstanceAskError::NotUp(name.to_owned()));
+    };
+    let alive = || process_alive(supervisor);
     Ok(client.ask_while(&request, timeout, &alive)?)
 }
 
