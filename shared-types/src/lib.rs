@@ -6,11 +6,16 @@
 //! alignment when a port connects, and only the version notices a changed layout that
 //! keeps the other two. Change a payload, bump its version.
 //!
-//! This crate holds data and names only: opening the services, waiting and driving are
+//! This crate holds data and names only (and the pose and angle math every crate shares):
+//! opening the services, waiting and driving are
 //! `agp_runtime`'s. Its one dependency on iceoryx2 is the `ZeroCopySend` derive.
 //!
 //! Units: SI inside (metres, seconds, radians), as in the rest of the code.
+//!
+//! `Pose2`, the one pose type of the workspace, carries its frame transforms; [`angle`]
+//! holds every angle wrapping. Both use `glam`, a plain math crate.
 
+pub mod angle;
 mod control;
 mod payloads;
 mod service_names;

@@ -1,3 +1,4 @@
+use glam::DVec2;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
@@ -26,6 +27,23 @@ pub struct Pose2 {
 impl Pose2 {
     pub const fn new(x: f64, y: f64, theta: f64) -> Self {
         Self { x, y, theta }
+    }
+
+    /// The pose's origin, metres.
+    pub fn position(&self) -> DVec2 {
+        DVec2::new(self.x, self.y)
+    }
+
+    /// A point of this pose's own frame expressed in the frame the pose is given in
+    /// (the world, for a pose in the world).
+    pub fn to_world(&self, p_local: DVec2) -> DVec2 {
+        self.position() + DVec2::from_angle(self.theta).rotate(p_local)
+    }
+
+    /// A point of the frame the pose is given in expressed in this pose's own frame: the
+    /// inverse of [`Pose2::to_world`].
+    pub fn to_local(&self, p_world: DVec2) -> DVec2 {
+        DVec2::from_angle(-self.theta).rotate(p_world - self.position())
     }
 }
 
@@ -682,5 +700,37 @@ mod session_key_tests {
         assert_ne!(a.token(0), b.token(0));
         assert_ne!(a.token(0), a.token(1));
         assert_eq!(SessionKey::from_hex("xyz"), None);
+    }
+}
+
+#[cfg(test)]
+mod pose_tests {
+    use super::*;
+
+    const TOL: f64 = 1e-12;
+
+    #[test]
+    fn a_quarter_turn_pose_maps_the_local_x_axis_onto_world_y() {
+        let pose = Pose2::new(1.0, 2.0, std::f64::consts::FRAC_PI_2);
+        let w = pose.to_world(DVec2::new(0.5, 0.0));
+        assert!((w - DVec2::new(1.0, 2.5)).length() < TOL, "{w}");
+        let l = pose.to_local(DVec2::new(1.0, 2.5));
+        assert!((l - DVec2::new(0.5, 0.0)).length() < TOL, "{l}");
+    }
+
+    #[test]
+    fn to_local_undoes_to_world_for_any_heading() {
+        let p = DVec2::new(-0.3, 0.7);
+        for k in -8..=8 {
+            let pose = Pose2::new(-0.2, 0.4, f64::from(k) * 0.9);
+            let back = pose.to_local(pose.to_world(p));
+            assert!((back - p).length() < TOL, "{k}: {back}");
+        }
+    }
+
+    #[test]
+    fn a_pose_keeps_its_layout_of_three_f64() {
+        assert_eq!(std::mem::size_of::<Pose2>(), 24);
+        assert_eq!(std::mem::align_of::<Pose2>(), 8);
     }
 }

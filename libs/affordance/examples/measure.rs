@@ -14,6 +14,7 @@
 #[path = "../tests/support/mod.rs"]
 mod support;
 
+use agp_shared_types::angle;
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -22,9 +23,7 @@ use agp_affordance::{
     PushOutcome, ShapeMatcher, ShapeMatcherConfig, SmoothingMethod,
 };
 use glam::DVec2;
-use support::{
-    Rng, angle_error, l_tetromino, learned_shape, place, sample_border, square, triangle,
-};
+use support::{Rng, l_tetromino, learned_shape, place, sample_border, square, triangle};
 
 fn percentile(v: &mut [f64], q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -157,7 +156,7 @@ fn main() {
                     times.push(s.elapsed().as_secs_f64() * 1e6);
                     let e = (
                         found.position.distance(position),
-                        angle_error(found.orientation_rad, theta, period),
+                        angle::distance(found.orientation_rad, theta, period),
                     );
                     if e.0 <= 0.003 && e.1 <= 3f64.to_radians() {
                         ok += 1;

@@ -1,4 +1,5 @@
 use agp_shared_types::Pose2;
+use agp_shared_types::angle;
 use glam::DVec2;
 
 use crate::affordance_gradient::{ALPHA_EPS_DEG, LayerGrid};
@@ -87,10 +88,8 @@ impl PushOutcome {
     pub fn from_poses(before: Pose2, after: Pose2, contact_point: DVec2) -> Self {
         let c0 = DVec2::new(before.x, before.y);
         let to_obj = DVec2::from_angle(-before.theta);
-        let mut rotation = (after.theta - before.theta).rem_euclid(std::f64::consts::TAU);
-        if rotation > std::f64::consts::PI {
-            rotation -= std::f64::consts::TAU;
-        }
+        let rotation =
+            angle::wrap_to_half_period(after.theta - before.theta, std::f64::consts::TAU);
         Self {
             contact_point_obj: to_obj.rotate(contact_point - c0),
             displacement_obj: to_obj.rotate(DVec2::new(after.x, after.y) - c0),

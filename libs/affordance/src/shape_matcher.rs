@@ -1,3 +1,4 @@
+use agp_shared_types::angle;
 use std::f64::consts::TAU;
 
 use agp_shared_types::{GRID_CELLS, GRID_SIDE};
@@ -440,7 +441,7 @@ impl ShapeMatcher {
             let seen = self
                 .refined
                 .iter()
-                .any(|r| angle_distance(r.theta, trial.theta, period) < 1.5 * coarse);
+                .any(|r| angle::distance(r.theta, trial.theta, period) < 1.5 * coarse);
             if !seen {
                 self.refined.push(trial);
             }
@@ -477,7 +478,7 @@ impl ShapeMatcher {
         let runner_up = self.refined[1..]
             .iter()
             .find(|r| {
-                angle_distance(r.theta, best.theta, period) > DISTINCT_ANGLE_RAD
+                angle::distance(r.theta, best.theta, period) > DISTINCT_ANGLE_RAD
                     || r.t.distance(best.t) > DISTINCT_POSITION_M
             })
             .copied();
@@ -537,7 +538,7 @@ impl ShapeMatcher {
         let runner_up = self
             .trials
             .iter()
-            .filter(|r| angle_distance(r.theta, best.theta, period) > DISTINCT_ANGLE_RAD)
+            .filter(|r| angle::distance(r.theta, best.theta, period) > DISTINCT_ANGLE_RAD)
             .copied()
             .min_by(|a, b| a.score.total_cmp(&b.score));
         ShapeMatch {
@@ -777,7 +778,7 @@ impl ShapeMatcher {
         let orientation_rad = if self.config.symmetry_order == 0 {
             0.0
         } else {
-            trial.theta.rem_euclid(self.symmetry_period_rad())
+            angle::wrap_positive(trial.theta, self.symmetry_period_rad())
         };
         MatchedPose {
             position: trial.t,
@@ -900,12 +901,6 @@ fn cells_avx2(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut 
 #[target_feature(enable = "avx512f,fma")]
 fn cells_avx512(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
     cells_body(rotation, rel_x, rel_y, cells);
-}
-
-/// Distance between two angles modulo `period`, in `[0, period / 2]`.
-fn angle_distance(a: f64, b: f64, period: f64) -> f64 {
-    let d = (a - b).rem_euclid(period);
-    d.min(period - d)
 }
 
 fn check_points(points: &[DVec2]) -> Result<(), ShapeMatchError> {

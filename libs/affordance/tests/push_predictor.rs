@@ -1,6 +1,7 @@
 //! The push predictor: pushes of the learning protocol's family (start on a circle, heading
 //! at the centroid turned by alpha), interpolated between learned alphas along each start.
 
+use agp_shared_types::angle;
 use std::f64::consts::{PI, TAU};
 
 use agp_affordance::{
@@ -12,10 +13,6 @@ use glam::DVec2;
 /// The round object's radius and the start circle's, metres.
 const R: f64 = 0.04;
 const START: f64 = 0.1;
-
-fn wrap(a: f64) -> f64 {
-    (a + PI).rem_euclid(TAU) - PI
-}
 
 /// Where the push from start angle `phi` at `alpha_deg` first meets the disc: its aim point.
 fn aim(phi: f64, alpha_deg: f64) -> Option<DVec2> {
@@ -86,8 +83,16 @@ fn between_learned_alphas_the_predictor_follows_the_pushes_of_one_start() {
             let (_, truth) = model(phi, alpha);
             let p = predictor.predict(c, alpha).expect("learned all round");
             let q = ag.predict(c, alpha).expect("learned all round");
-            ours.push(wrap(p.rotation_rad - truth).abs().to_degrees());
-            per_contact.push(wrap(q.rotation_rad - truth).abs().to_degrees());
+            ours.push(
+                angle::wrap_to_half_period_floor(p.rotation_rad - truth, TAU)
+                    .abs()
+                    .to_degrees(),
+            );
+            per_contact.push(
+                angle::wrap_to_half_period_floor(q.rotation_rad - truth, TAU)
+                    .abs()
+                    .to_degrees(),
+            );
         }
     }
     let worst = ours.iter().copied().fold(0.0, f64::max);
@@ -112,7 +117,7 @@ fn a_straight_push_starts_on_the_contacts_own_ray() {
     let (s, h) = approach_start(c, 0.0, 0.1).expect("a start");
     assert!((s - c.normalize() * 0.1).length() < 1e-9, "{s}");
     assert!(
-        wrap(h - (-c).to_angle()).abs() < 1e-9,
+        angle::wrap_to_half_period_floor(h - (-c).to_angle(), TAU).abs() < 1e-9,
         "heading {h} is not towards the centroid"
     );
 }
@@ -133,7 +138,7 @@ fn an_alpha_push_starts_where_its_line_meets_the_contact_at_that_alpha() {
             assert!(u.perp_dot(c - s).abs() < 1e-7, "alpha {alpha}, c {c}");
             assert!(u.dot(c - s) > 0.0);
             // ...and makes the angle alpha with the direction to the centroid.
-            let dev = wrap(h - (-s).to_angle()).to_degrees();
+            let dev = angle::wrap_to_half_period_floor(h - (-s).to_angle(), TAU).to_degrees();
             assert!((dev - alpha).abs() < 1e-6, "deviation {dev} vs {alpha}");
         }
     }

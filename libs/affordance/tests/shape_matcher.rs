@@ -3,10 +3,9 @@ mod support;
 use agp_affordance::{
     Grid, MatchMethod, ShapeMatchError, ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
 };
+use agp_shared_types::angle;
 use glam::DVec2;
-use support::{
-    Rng, angle_error, l_tetromino, learned_shape, place, sample_border, square, triangle,
-};
+use support::{Rng, l_tetromino, learned_shape, place, sample_border, square, triangle};
 
 /// Sigma of the Gaussians of the learned S, metres.
 const SHAPE_SIGMA_M: f64 = 0.0025;
@@ -85,7 +84,7 @@ fn recovers_poses(name: &str, v: &[DVec2], symmetry_order: u32, seed: u64) {
             let all = m.match_points(&points).expect("enough points");
             let found = all.best;
             let dp = found.position.distance(position);
-            let da = angle_error(found.orientation_rad, theta, period);
+            let da = angle::distance(found.orientation_rad, theta, period);
             assert!(
                 dp <= POSITION_TOLERANCE_M && da <= ANGLE_TOLERANCE_RAD,
                 "{all:?}\n{name} at {position} {:.1} deg, {coverage:?} ({} points): found {} {:.1} deg, \
@@ -135,7 +134,7 @@ fn the_papers_method_finds_a_fully_seen_triangle_and_l() {
             let points = measure(&v, position, theta, Coverage::Full, &mut rng);
             let found = m.match_points(&points).expect("enough points").best;
             let dp = found.position.distance(position);
-            let da = angle_error(found.orientation_rad, theta, period);
+            let da = angle::distance(found.orientation_rad, theta, period);
             assert!(
                 dp <= POSITION_TOLERANCE_M && da <= PAPER_ANGLE_TOLERANCE_RAD,
                 "{name}: off by {:.1} mm and {:.1} deg",
@@ -159,9 +158,9 @@ fn a_square_declared_without_symmetry_has_a_near_equal_runner_up() {
         .expect("the square matches at four rotations");
     // The runner-up is another quarter turn of the same square: as good a fit.
     let quarter = std::f64::consts::FRAC_PI_2;
-    assert!(angle_error(runner.orientation_rad, theta, quarter) < ANGLE_TOLERANCE_RAD);
+    assert!(angle::distance(runner.orientation_rad, theta, quarter) < ANGLE_TOLERANCE_RAD);
     assert!(
-        angle_error(
+        angle::distance(
             runner.orientation_rad,
             found.best.orientation_rad,
             std::f64::consts::TAU
@@ -209,7 +208,7 @@ fn refining_a_close_pose_converges_to_the_true_one() {
         "{found:?}"
     );
     assert!(
-        angle_error(found.orientation_rad, theta, std::f64::consts::TAU) <= ANGLE_TOLERANCE_RAD
+        angle::distance(found.orientation_rad, theta, std::f64::consts::TAU) <= ANGLE_TOLERANCE_RAD
     );
     assert!(found.inlier_fraction > 0.95);
     assert!(found.rms_error_m < 0.002);

@@ -61,7 +61,7 @@ pub fn ir_border_point(
 
 /// A point of the robot frame expressed in the frame `pose` lives in.
 pub fn to_frame(pose: Pose, p_robot: DVec2) -> DVec2 {
-    pose.position() + DVec2::from_angle(pose.theta).rotate(p_robot)
+    pose.to_world(p_robot)
 }
 
 /// The paper's mean IR vector (Algorithm 2, line 1): the sum over the sensors of their ray

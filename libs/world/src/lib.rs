@@ -33,15 +33,3 @@ pub(crate) fn line_of(text: &str, offset: usize) -> usize {
         .count()
         + 1
 }
-
-/// Angle wrapped into (-pi, pi].
-pub fn wrap_angle(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let mut r = a % t;
-    if r <= -std::f64::consts::PI {
-        r += t;
-    } else if r > std::f64::consts::PI {
-        r -= t;
-    }
-    r
-}

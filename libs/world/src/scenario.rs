@@ -4,6 +4,8 @@ use glam::DVec2;
 use serde::Deserialize;
 use toml::Spanned;
 
+pub use agp_shared_types::Pose2 as Pose;
+
 use crate::bounded_read::{BoundedReadError, MAX_CONFIG_FILE_BYTES, read_regular_text};
 use crate::geometry::{Polygon, PolygonError};
 use crate::{RobotDescription, line_of};
@@ -24,24 +26,6 @@ pub const OBJECT_RADIUS_MM: (f64, f64) = (5.0, 1000.0);
 pub const MIN_OBJECT_AREA_MM2: f64 = 10.0;
 /// Largest |angle| of a pose, degrees.
 pub const MAX_POSE_ANGLE_DEG: f64 = 360.0;
-
-/// A pose in the plane, SI units: metres and radians (counter-clockwise, 0 = +x).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Pose {
-    pub x: f64,
-    pub y: f64,
-    pub theta: f64,
-}
-
-impl Pose {
-    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
-        Self { x, y, theta }
-    }
-
-    pub fn position(&self) -> DVec2 {
-        DVec2::new(self.x, self.y)
-    }
-}
 
 /// The object's shape in its own frame, centred on its centroid.
 #[derive(Debug, Clone, PartialEq)]
@@ -556,7 +540,7 @@ fn bad_name(name: &str) -> Option<String> {
 fn start_clearance_mm(object: &ObjectSpec, robot: &RobotSetup) -> f64 {
     let body_radius = RobotDescription::epuck().body_radius;
     let o = object.start;
-    let p = DVec2::from_angle(-o.theta).rotate(robot.start.position() - o.position());
+    let p = o.to_local(robot.start.position());
     let to_border = match &object.shape {
         ObjectShape::Polygon(poly) if poly.contains(p) => -poly.border_distance(p),
         ObjectShape::Polygon(poly) => poly.border_distance(p),

@@ -30,7 +30,7 @@ impl From<&IrFrame> for IrView {
         Self {
             ir_sample: f.ir_sample,
             ir_raw: f.ir_raw,
-            odometry: Pose::new(f.odometry.x, f.odometry.y, f.odometry.theta),
+            odometry: f.odometry,
         }
     }
 }

@@ -13,6 +13,7 @@
 //! random alpha in [-15, 15] deg, predicted by the learned gradient and compared with what
 //! the simulator did.
 
+use agp_shared_types::angle;
 use std::f64::consts::{PI, TAU};
 use std::time::Instant;
 
@@ -26,7 +27,8 @@ use agp_planner::{
     PushRoutine, PushSettings,
 };
 use agp_shared_types::GRID_SIDE;
-use agp_world::{ObjectShape, Pose, Rng, RobotDescription, Scenario, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{ObjectShape, Pose, Rng, RobotDescription, Scenario};
 use glam::DVec2;
 
 use crate::{
@@ -553,10 +555,6 @@ fn ray_hit(shape: &ObjectShape, origin: DVec2, dir: DVec2) -> Option<DVec2> {
     Some(origin + dir * t)
 }
 
-fn to_object_frame(object: Pose, p: DVec2) -> DVec2 {
-    DVec2::from_angle(-object.theta).rotate(p - object.position())
-}
-
 fn view(sim: &Sim) -> IrView {
     let s = sim.sensors();
     IrView::new(s.ir_sample, s.ir_raw, s.odometry)
@@ -616,7 +614,7 @@ fn run_push(
         if run.touch_obj.is_none() && sim.in_contact() {
             let o = sim.object_pose();
             let rp = sim.robot_pose();
-            let c = to_object_frame(o, rp.position());
+            let c = o.to_local(rp.position());
             run.touch_obj = Some(nearest_border_point(&shape, c));
             let d = DVec2::from_angle(rp.theta - o.theta);
             run.aim_obj = ray_hit(&shape, c, d);
@@ -670,12 +668,6 @@ fn hold(sim: &mut Sim, seconds: f64, speed: f64, mut on_frame: impl FnMut(&IrVie
         on_frame(&view(sim));
         sim.step(speed, speed);
     }
-}
-
-/// Angle between `a` and `b` modulo `period`, in [0, period / 2].
-fn angle_distance(a: f64, b: f64, period: f64) -> f64 {
-    let d = (a - b).rem_euclid(period);
-    d.min(period - d)
 }
 
 /// Checks, without running anything, what [`run_object`] checks before it starts: the
@@ -849,7 +841,7 @@ pub fn run_object(
             let truth = PushTruth {
                 touch_obj: run.touch_obj,
                 aim_obj: run.aim_obj,
-                displacement_obj: to_object_frame(object0, after.position()),
+                displacement_obj: object0.to_local(after.position()),
                 rotation_rad: wrap_angle(after.theta - object0.theta),
                 after,
             };
@@ -909,7 +901,8 @@ pub fn run_object(
         pos_err.push((r.object_after.position() - t.truth.after.position()).length() * 1e3);
         if order != 0 {
             ori_err.push(
-                angle_distance(r.matched.orientation_rad, t.truth.after.theta, period).to_degrees(),
+                angle::distance(r.matched.orientation_rad, t.truth.after.theta, period)
+                    .to_degrees(),
             );
             let e = wrap_angle(r.outcome.rotation_rad - t.truth.rotation_rad).abs();
             if order > 1 && e > period / 4.0 {
@@ -1018,7 +1011,7 @@ pub fn run_object(
             contact,
             true_aim: run.aim_obj,
             alpha_deg: alpha,
-            displacement_obj: to_object_frame(object0, after.position()),
+            displacement_obj: object0.to_local(after.position()),
             rotation_rad: wrap_angle(after.theta - object0.theta),
         });
         tick(LearnStage::Evaluation, &mut done);

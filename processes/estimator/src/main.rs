@@ -25,7 +25,7 @@ use agp_shared_types::{
     EstimatorLearning, GRID_SIDE, GradientGrid, GridKind, IrFrame, LearnEvent, LearnEventKind,
     LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, monotonic_ns, stage,
 };
-use agp_world::{Pose, RobotDescription, Scenario};
+use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;
 use iceoryx2::port::notifier::Notifier;
@@ -217,11 +217,7 @@ fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow:
 }
 
 fn view(e: &LearnEvent) -> IrView {
-    IrView::new(
-        e.ir_sample,
-        e.ir_raw,
-        Pose::new(e.odometry.x, e.odometry.y, e.odometry.theta),
-    )
+    IrView::new(e.ir_sample, e.ir_raw, e.odometry)
 }
 
 impl Estimator {
@@ -619,7 +615,7 @@ impl State {
         };
         self.trials_total = self.trials_total.max(event.total);
         let v = view(event);
-        let object = Pose::new(event.object.x, event.object.y, event.object.theta);
+        let object = event.object;
         match kind {
             LearnEventKind::ShapeBegin => {
                 session.begin_shape_circling(object);

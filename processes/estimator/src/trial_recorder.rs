@@ -1,7 +1,7 @@
 use agp_affordance::{MatchedPose, PushOutcome, ShapeMatchError, ShapeMatcher};
-use agp_world::{
-    Pose, RobotDescription, border_range, ir_border_point, ir_point_robot, to_frame, wrap_angle,
-};
+use agp_shared_types::angle;
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{Pose, RobotDescription, border_range, ir_border_point, ir_point_robot, to_frame};
 use glam::DVec2;
 
 use crate::{ContactEstimates, ContactEstimator, ContactMethod, IrView, LearnedShape};
@@ -183,7 +183,7 @@ impl PushTracker {
         let period = matcher.symmetry_period_rad();
         // The matcher reports the orientation modulo the symmetry: the representative
         // nearest the last one.
-        let turn = wrap_period(m.orientation_rad - self.orientation, period);
+        let turn = angle::wrap_to_half_period_floor(m.orientation_rad - self.orientation, period);
         if m.inlier_fraction < TRACK_MIN_INLIERS
             || turn.abs() > TRACK_MAX_TURN.min(TRACK_MAX_TURN_PERIOD * period)
             || m.position.distance(self.position) > TRACK_MAX_SHIFT
@@ -194,11 +194,6 @@ impl PushTracker {
         self.position = m.position;
         self.updates += 1;
     }
-}
-
-/// `a` moved by a multiple of `period` into [-period / 2, period / 2).
-fn wrap_period(a: f64, period: f64) -> f64 {
-    (a + 0.5 * period).rem_euclid(period) - 0.5 * period
 }
 
 /// The estimator's side of one learning trial, fed one IR frame per control step.
@@ -446,7 +441,7 @@ impl TrialRecorder {
             1 => m.best.orientation_rad,
             _ => {
                 let period = matcher.symmetry_period_rad();
-                tracked + wrap_period(m.best.orientation_rad - tracked, period)
+                tracked + angle::wrap_to_half_period_floor(m.best.orientation_rad - tracked, period)
             }
         };
         let after = Pose::new(m.best.position.x, m.best.position.y, theta);
@@ -500,17 +495,8 @@ fn push_bounded(buf: &mut Vec<DVec2>, dropped: &mut usize, p: DVec2) {
 
 #[cfg(test)]
 mod tests {
-    use std::f64::consts::TAU;
 
     use super::*;
-
-    #[test]
-    fn wrapping_to_a_period_keeps_the_nearest_representative() {
-        let p = TAU / 3.0;
-        assert!((wrap_period(0.1, p) - 0.1).abs() < 1e-12);
-        assert!((wrap_period(p - 0.1, p) + 0.1).abs() < 1e-12);
-        assert!((wrap_period(-p - 0.2, p) + 0.2).abs() < 1e-12);
-    }
 
     #[test]
     fn calls_out_of_order_are_refused_and_change_nothing() {

@@ -1,4 +1,5 @@
-use agp_world::{Pose, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::Pose;
 
 /// Moves a differential-drive robot by the given wheel travels (metres), both wheels
 /// turning at constant speed over the interval: an exact arc of length

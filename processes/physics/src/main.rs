@@ -9,10 +9,10 @@ use agp_runtime::{
     shutdown_requested,
 };
 use agp_shared_types::{
-    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, Pose2, Reset, SessionKey, TimingHeader,
-    monotonic_ns, stage,
+    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, Reset, SessionKey, TimingHeader, monotonic_ns,
+    stage,
 };
-use agp_world::{Pose, RobotDescription, Scenario};
+use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use iceoryx2::identifiers::{UniqueNodeId, UniquePublisherId};
@@ -374,14 +374,6 @@ struct Runner {
     step_log: Option<StepLog>,
 }
 
-fn pose2(p: Pose) -> Pose2 {
-    Pose2::new(p.x, p.y, p.theta)
-}
-
-fn pose(p: Pose2) -> Pose {
-    Pose::new(p.x, p.y, p.theta)
-}
-
 impl Runner {
     /// Publishes the frame and ground truth of the current step. `cause` is the timing of
     /// the command that produced the step, COMMAND_RECEIVED and COMMAND_APPLIED stamped
@@ -395,9 +387,9 @@ impl Runner {
             sim_time_s: self.sim.sim_time(),
             ir_sample: s.ir_sample,
             ir_raw: s.ir_raw,
-            odometry: pose2(s.odometry),
+            odometry: s.odometry,
             fix_seq: s.fix_seq,
-            fix: pose2(s.fix),
+            fix: s.fix,
             reset_seq: self.reset_seq,
             active_epoch: self.active_epoch,
             cause,
@@ -409,8 +401,8 @@ impl Runner {
         let truth = GroundTruth {
             step,
             sim_time_s: self.sim.sim_time(),
-            robot: pose2(self.sim.robot_pose()),
-            object: pose2(self.sim.object_pose()),
+            robot: (self.sim.robot_pose()),
+            object: (self.sim.object_pose()),
             contact: self.sim.in_contact() as u8,
             _pad: [0; 7],
         };
@@ -469,7 +461,7 @@ impl Runner {
         self.gate.name_strangers(&self.ports);
         if let Some(r) = last {
             let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
-            self.sim.reset(pose(r.object), pose(r.robot));
+            self.sim.reset(r.object, r.robot);
             self.reset_seq = r.seq;
             return Ok(true);
         }

@@ -1,4 +1,5 @@
-use agp_world::{Localization, Pose, ResponseCurve, Rng, RobotDescription, RobotSetup, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{Localization, Pose, ResponseCurve, Rng, RobotDescription, RobotSetup};
 use glam::DVec2;
 
 use crate::drive::drive_arc;

@@ -1,4 +1,5 @@
-use agp_world::{ObjectShape, Pose, RobotDescription, Scenario, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{ObjectShape, Pose, RobotDescription, Scenario};
 use glam::DVec2;
 use rapier2d::math::{Pose as RPose, Vector as RVec};
 use rapier2d::prelude::{
@@ -387,7 +388,7 @@ impl Sim {
     /// the current poses. Ground truth: the robot itself has no contact sensor.
     pub fn in_contact(&self) -> bool {
         let o = self.object_pose();
-        let local = DVec2::from_angle(-o.theta).rotate(self.robot_pose.position() - o.position());
+        let local = o.to_local(self.robot_pose.position());
         let d = self
             .object_shape
             .distance_to_local_point(RVec::new(local.x as f32, local.y as f32), true)

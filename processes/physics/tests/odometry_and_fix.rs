@@ -75,7 +75,7 @@ fn overhead_fixes_come_every_period_with_the_stated_noise() {
         let (f, t) = (s.sensors().fix, s.robot_pose());
         assert_eq!(s.sensors().fix_seq, k, "one fix per period");
         sx += (f.x - t.x).powi(2) + (f.y - t.y).powi(2);
-        st += agp_world::wrap_angle(f.theta - t.theta).powi(2);
+        st += agp_shared_types::angle::wrap_angle(f.theta - t.theta).powi(2);
     }
     let sd_xy = (sx / (2.0 * fixes as f64)).sqrt();
     let sd_theta = (st / fixes as f64).sqrt();

@@ -1,6 +1,7 @@
 use std::f64::consts::{FRAC_PI_2, TAU};
 
-use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point, to_frame, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point, to_frame};
 use glam::DVec2;
 
 /// Which side of the robot the object is kept on while circling.

@@ -22,6 +22,7 @@
 //! the `oracle` read ground truth: the `affordance` and `baseline` planners see IR
 //! readings, odometry and the overhead fix of the robot, nothing else.
 
+use agp_shared_types::angle;
 use std::time::Instant;
 
 use agp_affordance::{
@@ -473,7 +474,6 @@ pub fn drive_episode<W: World>(
     } = episode;
     run.record();
     let evaluation = run.world.object_truth().map(|truth| {
-        let truth = Pose2::new(truth.x, truth.y, truth.theta);
         Evaluation::judge(task, truth, order, config, std::mem::take(&mut run.samples))
     });
     Ok(EpisodeResult {
@@ -602,7 +602,7 @@ impl<W: World> Episode<'_, W> {
                 } else {
                     std::f64::consts::TAU / f64::from(self.order)
                 };
-                let turned = symmetric_period_distance(est.pose.theta - before.theta, period);
+                let turned = angle::distance(est.pose.theta - before.theta, 0.0, period);
                 // A push that reaches the object moves it 9 mm or more; the estimates agree
                 // to a millimetre or two.
                 self.push_longer = moved < 0.003 && turned < 3f64.to_radians();
@@ -715,7 +715,7 @@ impl<W: World> Episode<'_, W> {
                 "the oracle needs the object's true pose, which this world does not offer".into(),
             )
         })?;
-        Ok(Pose2::new(p.x, p.y, p.theta))
+        Ok(p)
     }
 
     /// The point the centroid should head for, and whether the task is done, by `est`.
@@ -864,7 +864,7 @@ impl<W: World> Episode<'_, W> {
         let mut best: Option<(f64, DVec2, f64, Prediction)> = None;
         for &contact in planner.contacts() {
             let push_dir = rot.rotate(-contact).to_angle();
-            if agp_world::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
+            if agp_shared_types::angle::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
                 continue;
             }
             let Some(p) = planner.predictor().predict(contact, 0.0) else {
@@ -879,7 +879,7 @@ impl<W: World> Episode<'_, W> {
             let scale = (to.length() / moved.length()).clamp(0.2, 1.0);
             let f = (scale * (1.0 + k) - k).clamp(0.1, 1.0);
             let s = (f + k) / (1.0 + k);
-            let off = agp_world::wrap_angle(moved.to_angle() - want).abs()
+            let off = agp_shared_types::angle::wrap_angle(moved.to_angle() - want).abs()
                 + c.reach_rotation_weight_m_per_rad / STEER_LEVER_M * p.rotation_rad.abs();
             if best.is_none_or(|b| off < b.0) {
                 let scaled = Prediction {
@@ -895,7 +895,11 @@ impl<W: World> Episode<'_, W> {
         let sw = est.position() + rot.rotate(s);
         Some(PushOrder {
             retry: false,
-            start: Pose2::new(sw.x, sw.y, agp_world::wrap_angle(h + est.pose.theta)),
+            start: Pose2::new(
+                sw.x,
+                sw.y,
+                agp_shared_types::angle::wrap_angle(h + est.pose.theta),
+            ),
             duration: f * c.push.push_duration,
             prediction: Some(prediction),
             orbit: *start_radius,
@@ -1058,7 +1062,7 @@ impl<W: World> Run<'_, W> {
         if let Some(p) = self.world.object_truth() {
             self.samples.push(PoseSample {
                 t_s: self.world.sim_time(),
-                pose: Pose2::new(p.x, p.y, p.theta),
+                pose: p,
             });
         }
     }
@@ -1261,7 +1265,7 @@ fn match_pose(matcher: &mut ShapeMatcher, points: &[DVec2], guess: Option<Pose2>
     if let (Some(g), Some(r)) = (guess, m.runner_up) {
         let off = |p: &agp_affordance::MatchedPose| {
             (p.position - DVec2::new(g.x, g.y)).length()
-                + 0.05 * symmetric_period_distance(p.orientation_rad - g.theta, period)
+                + 0.05 * angle::distance(p.orientation_rad - g.theta, 0.0, period)
         };
         if r.rms_error_m <= 1.3 * best.rms_error_m && off(&r) + 0.01 < off(&best) {
             best = r;
@@ -1275,11 +1279,6 @@ fn match_pose(matcher: &mut ShapeMatcher, points: &[DVec2], guess: Option<Pose2>
         best.position.y,
         best.orientation_rad,
     ))
-}
-
-fn symmetric_period_distance(a: f64, period: f64) -> f64 {
-    let d = a.rem_euclid(period);
-    d.min(period - d)
 }
 
 /// Moves the predicted `pose` along the robot's heading so that the object's learned
@@ -1322,7 +1321,7 @@ pub fn border_centroid(points: &[DVec2]) -> Option<DVec2> {
     let mean = points.iter().sum::<DVec2>() / points.len() as f64;
     let mut sums = [(DVec2::ZERO, 0usize); BINS];
     for p in points {
-        let a = (*p - mean).to_angle().rem_euclid(std::f64::consts::TAU);
+        let a = angle::wrap_positive((*p - mean).to_angle(), std::f64::consts::TAU);
         let k = ((a / std::f64::consts::TAU * BINS as f64) as usize).min(BINS - 1);
         sums[k].0 += *p;
         sums[k].1 += 1;

@@ -33,11 +33,12 @@ use agp_planner::{
 use agp_runtime::{
     AgpIpc, DriveError, Instance, LockstepDriver, WaitOutcome, WaitStrategy, Waiter, alloc_count,
 };
+use agp_shared_types::angle::wrap_angle;
 use agp_shared_types::{
     IrFrame, LearnEvent, LearnEventKind, LearnReport, LearnReportKind, ObjectEstimate, Pose2,
     monotonic_ns, stage,
 };
-use agp_world::{Pose, RobotDescription, Scenario, wrap_angle};
+use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use glam::DVec2;
 use iceoryx2::port::notifier::Notifier;
@@ -397,10 +398,6 @@ enum TrialRun {
     Pushed { lap_closed: bool },
 }
 
-fn pose(p: Pose2) -> Pose {
-    Pose::new(p.x, p.y, p.theta)
-}
-
 /// The robot on a circle of radius `r` round `object` at angle `phi` (from the centroid),
 /// facing the centroid turned by `alpha` (rad).
 fn start_pose(object: Pose2, r: f64, phi: f64, alpha: f64) -> Pose2 {
@@ -502,9 +499,9 @@ impl Learner<'_> {
         let mut f = self.frame();
         self.circling.restart(f.sim_time_s);
         loop {
-            let (l, r) =
-                self.circling
-                    .update(f.sim_time_s, f.ir_sample, pose(f.odometry), &f.ir_raw);
+            let (l, r) = self
+                .circling
+                .update(f.sim_time_s, f.ir_sample, f.odometry, &f.ir_raw);
             if let CirclePhase::Done { outcome, .. } = self.circling.phase() {
                 return Ok((f, outcome == CircleOutcome::Closed));
             }
@@ -637,7 +634,7 @@ pub fn run(
         radius: scenario.object.shape.radius() + robot.body_radius + settings.start_margin_m,
         circling: CircleRoutine::new(settings.circle, &robot, 0.0),
         settings,
-        object0: Pose2::new(o.x, o.y, o.theta),
+        object0: o,
         total,
         session: 0,
     };

@@ -11,8 +11,9 @@ use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
     AgpIpc, DriveError, Instance, LockstepDriver, alloc_count, install_shutdown_handler,
 };
+use agp_shared_types::angle::wrap_angle;
 use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns, stage};
-use agp_world::{RobotDescription, Scenario, wrap_angle};
+use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 
@@ -288,10 +289,7 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
         let heading = wrap_angle(side + std::f64::consts::PI);
         // The learning phase puts the object back before each trial; so does the script.
         let push = (|| -> Result<(), DriveError> {
-            let frame = *driver.reset(
-                Pose2::new(obj.x, obj.y, obj.theta),
-                Pose2::new(x, y, heading),
-            )?;
+            let frame = *driver.reset(obj, Pose2::new(x, y, heading))?;
             let start_odo = frame.odometry;
             let mut routine = PushRoutine::new(settings, frame.sim_time_s);
             let mut peak = 0f32;

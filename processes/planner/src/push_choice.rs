@@ -11,7 +11,8 @@
 
 use agp_affordance::{AffordanceGradient, Prediction, PushPredictor, approach_start};
 use agp_shared_types::Pose2;
-use agp_world::wrap_angle;
+use agp_shared_types::angle;
+use agp_shared_types::angle::wrap_angle;
 use glam::DVec2;
 
 /// What the planner is after.
@@ -249,8 +250,7 @@ pub fn symmetric_angle_error(angle: f64, order: u32) -> f64 {
         return 0.0;
     }
     let period = std::f64::consts::TAU / f64::from(order);
-    let a = angle.rem_euclid(period);
-    if a > 0.5 * period { a - period } else { a }
+    angle::wrap_to_half_period(angle, period)
 }
 
 #[cfg(test)]

@@ -1,7 +1,8 @@
 //! The robot's own pose as the robot knows it: wheel odometry, pulled towards each overhead
 //! fix (robot-and-world.md). Nothing here sees the object.
 
-use agp_world::{Pose, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::Pose;
 use glam::DVec2;
 
 /// Odometry corrected by the overhead fixes: the pose is `offset ∘ odometry`, and each new

@@ -58,18 +58,14 @@ struct PipelineWorld {
     swap_in: Option<SwapIn>,
 }
 
-fn pose(p: Pose2) -> Pose {
-    Pose::new(p.x, p.y, p.theta)
-}
-
 impl World for PipelineWorld {
     fn senses(&self) -> Senses {
         let f = self.driver.frame();
         Senses {
             ir_raw: f.ir_raw,
             ir_sample: f.ir_sample,
-            odometry: pose(f.odometry),
-            fix: pose(f.fix),
+            odometry: f.odometry,
+            fix: f.fix,
             fix_seq: f.fix_seq,
         }
     }
@@ -97,7 +93,7 @@ impl World for PipelineWorld {
     }
 
     fn object_truth(&self) -> Option<Pose> {
-        self.oracle.then(|| pose(self.driver.truth().object))
+        self.oracle.then(|| self.driver.truth().object)
     }
 }
 
@@ -110,7 +106,7 @@ pub fn task_of(scenario: &Scenario, kind: TaskKind, goal: Option<Pose2>) -> Task
         _ => {
             let g = scenario.task.goal;
             Task::Place {
-                goal: goal.unwrap_or(Pose2::new(g.x, g.y, g.theta)),
+                goal: goal.unwrap_or(g),
             }
         }
     }
@@ -313,7 +309,7 @@ fn face_object(
         let (l, r) = if left { (-v, v) } else { (v, -v) };
         world.step(l, r)?;
         let s = world.senses();
-        turned += agp_world::wrap_angle(s.odometry.theta - heading);
+        turned += agp_shared_types::angle::wrap_angle(s.odometry.theta - heading);
         heading = s.odometry.theta;
         if s.ir_sample == sample {
             continue;

@@ -1,7 +1,8 @@
 //! Getting the robot to the start of its next push without touching the object: out to a
 //! circle around the object, along it, then turning in place to the push heading.
 
-use agp_world::{Pose, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::Pose;
 use glam::DVec2;
 
 /// How the robot travels.

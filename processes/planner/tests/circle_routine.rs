@@ -2,6 +2,7 @@
 //! one lap closes, the border points lie on the true border, they cover it, and the robot
 //! never pushes the object. Run with `--nocapture` for the per-object report.
 
+use agp_shared_types::angle;
 use std::f64::consts::PI;
 
 use agp_physics::{Sim, SimConfig};
@@ -23,17 +24,12 @@ fn shape_distance(shape: &ObjectShape, p: DVec2) -> f64 {
     }
 }
 
-fn to_object_frame(object: Pose, p: DVec2) -> DVec2 {
-    DVec2::from_angle(-object.theta).rotate(p - object.position())
-}
-
 /// The robot pose `START_GAP` from the object along direction `from_deg` (world, from the
 /// object's centroid), facing the centroid.
 fn start_pose(shape: &ObjectShape, object: Pose, from_deg: f64, body_radius: f64) -> Pose {
     let dir = DVec2::from_angle(from_deg.to_radians());
-    let gap_at = |s: f64| {
-        shape_distance(shape, to_object_frame(object, object.position() + dir * s)) - body_radius
-    };
+    let gap_at =
+        |s: f64| shape_distance(shape, object.to_local(object.position() + dir * s)) - body_radius;
     let (mut lo, mut hi) = (0.0, shape.radius() + body_radius + 0.1);
     for _ in 0..100 {
         let mid = 0.5 * (lo + hi);
@@ -44,7 +40,11 @@ fn start_pose(shape: &ObjectShape, object: Pose, from_deg: f64, body_radius: f64
         }
     }
     let c = object.position() + dir * hi;
-    Pose::new(c.x, c.y, (from_deg.to_radians() + PI).rem_euclid(2.0 * PI))
+    Pose::new(
+        c.x,
+        c.y,
+        angle::wrap_positive(from_deg.to_radians() + PI, 2.0 * PI),
+    )
 }
 
 /// What one circling did, measured against the ground truth.
@@ -161,10 +161,10 @@ fn circle(name: &str, from_deg: f64, side: Side, noise: Noise) -> Lap {
         }
         sim.step(l, r);
         let o = sim.object_pose();
-        let body = to_object_frame(o, sim.robot_pose().position());
+        let body = o.to_local(sim.robot_pose().position());
         min_gap = min_gap.min(shape_distance(shape, body) - robot.body_radius);
         drift = drift.max((o.position() - object.position()).length());
-        turn = turn.max(agp_world::wrap_angle(o.theta - object.theta).abs());
+        turn = turn.max(agp_shared_types::angle::wrap_angle(o.theta - object.theta).abs());
     }
     let outcome = match routine.phase() {
         CirclePhase::Done { outcome, .. } => Some(outcome),
@@ -175,13 +175,13 @@ fn circle(name: &str, from_deg: f64, side: Side, noise: Noise) -> Lap {
     // pose times the inverse of odometry's start pose (the identity here, kept explicit).
     // Then world -> object frame with the object's true start pose.
     let to_world = |p: DVec2| {
-        let local = DVec2::from_angle(-odometry_start.theta).rotate(p - odometry_start.position());
-        start.position() + DVec2::from_angle(start.theta).rotate(local)
+        let local = odometry_start.to_local(p);
+        start.to_world(local)
     };
     let local: Vec<DVec2> = routine
         .border_points()
         .iter()
-        .map(|&p| to_object_frame(object, to_world(p)))
+        .map(|&p| object.to_local(to_world(p)))
         .collect();
     let mut err: Vec<f64> = local
         .iter()
@@ -197,7 +197,7 @@ fn circle(name: &str, from_deg: f64, side: Side, noise: Noise) -> Lap {
     };
     let mut sectors = [0usize; 12];
     for p in &local {
-        let a = p.y.atan2(p.x).rem_euclid(2.0 * PI);
+        let a = angle::wrap_positive(p.y.atan2(p.x), 2.0 * PI);
         sectors[((a / (PI / 6.0)) as usize).min(11)] += 1;
     }
     let (worst_hole_mm, worst_hole_at) = contour_samples(shape, 0.001)

@@ -23,10 +23,6 @@ const PUSH_S: f64 = 0.5;
 /// Gap (m) between the robot's shell and the object's farthest point at a push's start.
 const START_GAP: f64 = 0.02;
 
-fn pose2(p: Pose) -> Pose2 {
-    Pose2::new(p.x, p.y, p.theta)
-}
-
 fn start_radius(scenario: &Scenario, robot: &RobotDescription) -> f64 {
     scenario.object.shape.radius() + robot.body_radius + START_GAP
 }
@@ -101,8 +97,7 @@ fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Affordance
             };
             sim.reset(home, Pose::new(s.x, s.y, heading));
             if push(&mut sim, PUSH_S, 2.0 * r / SPEED) {
-                let outcome =
-                    PushOutcome::from_poses(pose2(home), pose2(sim.object_pose()), s + t * u);
+                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u);
                 learner.add_push(alpha, &outcome).expect("push");
             }
         }
@@ -145,7 +140,7 @@ fn place(scenario: &Scenario, ag: &AffordanceGradient, goal: Pose2, max_pushes: 
                 orientation_error_deg: eo.to_degrees(),
             };
         }
-        let object = pose2(sim.object_pose());
+        let object = sim.object_pose();
         let plan = planner.plan(object, &target).expect("a push");
         // Back off, then round the object to the push's start.
         for _ in 0..(0.15 / dt).round() as u64 {
@@ -213,7 +208,7 @@ fn check_placement(name: &str) {
     // The scenario's own goal, then random goals as `agp bench place` draws them: 250 to
     // 500 mm away in any direction, any orientation.
     let g = scenario.task.goal;
-    let mut goals = vec![Pose2::new(g.x, g.y, g.theta)];
+    let mut goals = vec![g];
     let mut rng = Rng::new(scenario.task.seed);
     while goals.len() < 8 {
         let d = 0.25 + 0.25 * rng.uniform();

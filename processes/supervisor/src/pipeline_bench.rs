@@ -107,10 +107,7 @@ impl PipelineBench {
         self.episodes += 1;
         let o = self.scenario.object.start;
         let r = self.scenario.robot.start;
-        match self
-            .driver
-            .reset(Pose2::new(o.x, o.y, o.theta), Pose2::new(r.x, r.y, r.theta))
-        {
+        match self.driver.reset(o, r) {
             Ok(_) => {}
             Err(DriveError::Shutdown) => bail!("interrupted"),
             Err(e) => return Err(e).context("cannot reset the bench's physics"),

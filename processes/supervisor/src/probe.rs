@@ -11,7 +11,8 @@ use std::time::Duration;
 
 use agp_runtime::{DriveError, Instance, LockstepDriver, install_shutdown_handler};
 use agp_shared_types::Pose2;
-use agp_world::{RobotDescription, Scenario, wrap_angle};
+use agp_shared_types::angle::wrap_angle;
+use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 
@@ -147,7 +148,7 @@ fn drive(
     let side = obj.theta + args.angle_deg.to_radians();
     let (x, y) = (obj.x + radius * side.cos(), obj.y + radius * side.sin());
     let heading = wrap_angle(side + std::f64::consts::PI + args.alpha_deg.to_radians());
-    let object_start = Pose2::new(obj.x, obj.y, obj.theta);
+    let object_start = obj;
     let dt = 1.0 / RATE_HZ;
     let v = args.speed_mm_s * 1e-3;
 

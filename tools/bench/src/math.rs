@@ -3,6 +3,7 @@
 //! implementation written for obviousness, the inputs to run them on, and the checks that
 //! ours and the reference agree.
 
+use agp_shared_types::angle;
 use std::f64::consts::TAU;
 use std::time::Instant;
 
@@ -204,14 +205,11 @@ impl PaperReference {
             // Every rotation ties.
             return 0.0;
         }
-        ((best_start as f64 + (best_len - 1) as f64 / 2.0) * TAU / n as f64).rem_euclid(TAU)
+        angle::wrap_positive(
+            (best_start as f64 + (best_len - 1) as f64 / 2.0) * TAU / n as f64,
+            TAU,
+        )
     }
-}
-
-/// Distance between two angles modulo `period`, in `[0, period / 2]`.
-pub fn angle_distance(a: f64, b: f64, period: f64) -> f64 {
-    let d = (a - b).rem_euclid(period);
-    d.min(period - d)
 }
 
 /// The largest orientation difference (radians, modulo the matcher's symmetry) between
@@ -230,7 +228,7 @@ pub fn orientation_disagreement(
             .best
             .orientation_rad;
         let theirs = reference.orientation_rad(points);
-        worst = worst.max(angle_distance(ours, theirs, period));
+        worst = worst.max(angle::distance(ours, theirs, period));
     }
     Ok(worst)
 }
@@ -438,11 +436,7 @@ pub fn learn_from_sim(scenario: &Scenario, starts_per_alpha: usize) -> Result<Af
                 sim.step(0.0, 0.0);
             }
             let o = sim.object_pose();
-            let outcome = PushOutcome::from_poses(
-                Pose2::new(home.x, home.y, home.theta),
-                Pose2::new(o.x, o.y, o.theta),
-                s + t * u,
-            );
+            let outcome = PushOutcome::from_poses(home, o, s + t * u);
             learner
                 .add_push(alpha, &outcome)
                 .context("cannot learn a push")?;

@@ -6,12 +6,13 @@ use agp_affordance::{
     ShapeMatcherConfig,
 };
 use agp_bench::math::{
-    PaperReference, angle_distance, circling_points, learn_from_sim, orientation_disagreement,
-    perimeter, polygon_of, push_cost_disagreement, random_goals, random_grid, reference_smooth,
+    PaperReference, circling_points, learn_from_sim, orientation_disagreement, perimeter,
+    polygon_of, push_cost_disagreement, random_goals, random_grid, reference_smooth,
     smoothing_disagreement, start_radius_m,
 };
 use agp_planner::{PushChoiceSettings, PushPlanner};
 use agp_shared_types::Pose2;
+use agp_shared_types::angle;
 use agp_world::{Rng, RobotDescription, Scenario};
 use glam::DVec2;
 
@@ -105,7 +106,7 @@ fn the_paper_match_finds_the_orientation_of_the_brute_force_within_1_deg() {
     // few degrees: 5 deg allowed, as in agp-affordance's tests).
     for (points, truth) in sets.iter().zip(truths) {
         let found = reference.orientation_rad(points);
-        let e = angle_distance(found, truth, std::f64::consts::TAU).to_degrees();
+        let e = angle::distance(found, truth, std::f64::consts::TAU).to_degrees();
         assert!(e <= 5.0, "brute force off by {e:.1} deg");
     }
 }

@@ -136,9 +136,3 @@ pub fn learned_shape(v: &[DVec2], sigma_m: f64) -> Grid {
 pub fn place(p: DVec2, position: DVec2, theta: f64) -> DVec2 {
     position + DVec2::from_angle(theta).rotate(p)
 }
-
-/// Distance between two angles modulo `period`.
-pub fn angle_error(a: f64, b: f64, period: f64) -> f64 {
-    let d = (a - b).rem_euclid(period);
-    d.min(period - d)
-}

@@ -5,7 +5,6 @@
 use agp_affordance::{AffordanceGradient, AffordanceLearner, LearnerConfig, PushOutcome};
 use agp_physics::{Sim, SimConfig};
 use agp_planner::{ContactSense, PushPhase, PushRoutine, PushSettings};
-use agp_shared_types::Pose2;
 use agp_world::{ObjectShape, Pose, RobotDescription, Scenario};
 use glam::DVec2;
 
@@ -13,10 +12,6 @@ use glam::DVec2;
 pub const PUSH_S: f64 = 0.5;
 /// Gap (m) between the robot's shell and the object's farthest point at a push's start.
 pub const START_GAP: f64 = 0.02;
-
-fn pose2(p: Pose) -> Pose2 {
-    Pose2::new(p.x, p.y, p.theta)
-}
 
 /// Distance along the ray from `origin` (object frame) to the object's border.
 fn border_hit(shape: &ObjectShape, origin: DVec2, dir: DVec2) -> Option<f64> {
@@ -86,8 +81,7 @@ pub fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Afford
                 sim.step(0.0, 0.0);
             }
             if touched {
-                let outcome =
-                    PushOutcome::from_poses(pose2(home), pose2(sim.object_pose()), s + t * u);
+                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u);
                 learner.add_push(alpha, &outcome).expect("push");
             }
         }
