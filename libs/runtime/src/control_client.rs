@@ -65,6 +65,9 @@ pub fn ask_with(
     if !InstanceLock::is_held(&instance) {
         return Err(InstanceAskError::NotUp(name.to_owned()));
     }
+    let Some(supervisor) = InstanceLock::holder_pid(&instance) else {
+        return Err(InstanceAskError::Starting(name.to_owned()));
+    };
     // Until then the supervisor is still starting (it may be cleaning what a previous run
     // left): a node of ours would be a stranger in its way.
     if !instance.control_exists() {
@@ -79,9 +82,6 @@ pub fn ask_with(
     let client = ControlClient::open(&instance, &node, ANSWER_TIMEOUT)?;
     // A supervisor killed while we wait never answers: stop waiting when it is gone, so
     // no client of a dead supervisor lingers in the way of the next `agp up`.
-    let Some(supervisor) = InstanceLock::holder_pid(&instance) else {
-        return Err(InstanceAskError::NotUp(name.to_owned()));
-    };
     let alive = || process_alive(supervisor);
     Ok(client.ask_while(&request, timeout, &alive)?)
 }

@@ -293,7 +293,20 @@ impl Instance {
             }
         }
         if self.root.symlink_metadata().is_ok() {
-            std::fs::remove_dir_all(&self.root)?;
+            // A client of the dead supervisor that gives up just now removes its node's
+            // files under our feet: take what is left again.
+            let mut tries = 0;
+            loop {
+                match std::fs::remove_dir_all(&self.root) {
+                    Ok(()) => break,
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => break,
+                    Err(e) if tries < 10 && e.kind() == std::io::ErrorKind::DirectoryNotEmpty => {
+                        tries += 1;
+                        std::thread::sleep(std::time::Duration::from_millis(20));
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
             removed += 1;
         }
         Ok(removed)

@@ -77,7 +77,18 @@ impl InstanceLock {
         }
     }
 
-    /// The pid the supervisor holding `instance` wrote into its lock, if one holds it.
+    /// Writes this process's pid into the lock: from now on it answers on the instance's
+    /// control service, and clients may ask it ([`InstanceLock::holder_pid`]).
+    pub fn announce(&mut self) -> std::io::Result<()> {
+        use std::io::Seek;
+        self.file.set_len(0)?;
+        self.file.rewind()?;
+        writeln!(self.file, "{}", std::process::id())?;
+        self.file.flush()
+    }
+
+    /// The pid the supervisor holding `instance` wrote into its lock once it answers; `None`
+    /// when none holds it or the one that does is still starting.
     pub fn holder_pid(instance: &Instance) -> Option<u32> {
         if !Self::is_held(instance) {
             return None;
@@ -122,8 +133,9 @@ impl InstanceLock {
             if !same {
                 continue;
             }
+            // Empty until the supervisor answers (`announce`): a client that finds no pid
+            // makes no node in the way of the leftovers being cleaned.
             file.set_len(0).map_err(io)?;
-            writeln!(file, "{}", std::process::id()).map_err(io)?;
             return Ok(Self { path, file });
         }
         Err(io(std::io::Error::other(
@@ -185,9 +197,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_second_lock_of_a_live_instance_is_refused_with_the_holders_pid() {
+    fn a_second_lock_of_a_live_instance_is_refused_with_the_holders_pid_once_it_answers() {
         let instance = Instance::new("t-sup-lock").expect("valid name");
-        let first = InstanceLock::acquire(&instance).expect("first lock");
+        let mut first = InstanceLock::acquire(&instance).expect("first lock");
+        // Still starting: held, but no pid for clients to ask yet.
+        assert!(InstanceLock::is_held(&instance));
+        assert_eq!(InstanceLock::holder_pid(&instance), None);
+        match InstanceLock::acquire(&instance) {
+            Err(InstanceLockError::Held { pid, .. }) => assert_eq!(pid, None),
+            other => panic!("expected Held, got {other:?}"),
+        }
+        first.announce().expect("write the pid");
+        assert_eq!(
+            InstanceLock::holder_pid(&instance),
+            Some(std::process::id())
+        );
         match InstanceLock::acquire(&instance) {
             Err(InstanceLockError::Held { pid, .. }) => {
                 assert_eq!(pid, Some(std::process::id()));

@@ -191,7 +191,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     };
     let instance = Instance::new(&config.instance)
         .map_err(|e| anyhow!("bad instance name `{}`: {e}", config.instance))?;
-    let lock = InstanceLock::acquire(&instance)?;
+    let mut lock = InstanceLock::acquire(&instance)?;
 
     clean_leftovers(&instance, &log)?;
     std::fs::create_dir_all(&config.results).with_context(|| {
@@ -243,6 +243,13 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
             )));
         }
     };
+    // It answers from now on: clients (`agp status`, `agp down`, ...) may make their nodes.
+    if let Err(e) = lock.announce() {
+        warn(format_args!(
+            "agp: cannot write the pid into the lock of instance `{}` ({e}): `agp status` and `agp down` will say it is starting",
+            config.instance
+        ));
+    }
 
     let mut slots: Vec<Slot<'_>> = config
         .processes
@@ -358,11 +365,15 @@ fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
     }
     let deadline = Instant::now() + LEFTOVER_DEATH_WAIT;
     loop {
-        let alive = alive_nodes(instance);
-        if alive.is_empty() {
+        if alive_nodes(instance, true).is_empty() {
             break;
         }
         if Instant::now() >= deadline {
+            // A client of the dead supervisor still waiting holds nothing the run needs.
+            let alive = alive_nodes(instance, false);
+            if alive.is_empty() {
+                break;
+            }
             anyhow::bail!(
                 "instance `{}` has live processes not started by a supervisor ({}); stop them or pick another name with `--instance`",
                 instance.name(),
@@ -387,7 +398,7 @@ fn clean_leftovers(instance: &Instance, log: &Log) -> Result<()> {
 }
 
 /// The live iceoryx2 nodes of `instance`, as `name (pid N)`.
-pub(crate) fn alive_nodes(instance: &Instance) -> Vec<String> {
+pub(crate) fn alive_nodes(instance: &Instance, with_clients: bool) -> Vec<String> {
     let mut alive = Vec::new();
     let listed = Node::<AgpIpc>::list(instance.config(), |state| {
         if let NodeState::Alive(view) = state {
@@ -395,10 +406,11 @@ pub(crate) fn alive_nodes(instance: &Instance) -> Vec<String> {
                 // A client of the dead supervisor (`agp status` polling it) holds nothing
                 // the run needs, and gives up its request once it sees the supervisor gone.
                 Some(d)
-                    if is_client_node(
-                        d.name().as_str(),
-                        u32::try_from(d.process_id().value()).unwrap_or(0),
-                    ) => {}
+                    if !with_clients
+                        && is_client_node(
+                            d.name().as_str(),
+                            u32::try_from(d.process_id().value()).unwrap_or(0),
+                        ) => {}
                 Some(d) => alive.push(format!("node `{}` (pid {})", d.name(), d.process_id())),
                 None => alive.push("a node".to_owned()),
             }
