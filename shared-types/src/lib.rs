@@ -39,3 +39,7 @@ pub fn monotonic_ns() -> u64 {
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
+
+/// Default physics rate, in steps per second: launch.toml's `[clock] rate_hz` when absent,
+/// and the probe's.
+pub const DEFAULT_RATE_HZ: f64 = 640.0;

@@ -170,32 +170,80 @@ pub struct GroundTruth {
     pub _pad: [u8; 7],
 }
 
-/// The estimator's belief about the object, in the robot's odometry frame.
+/// What the estimator perceives at one frame: the robot's fused pose, contact, and the
+/// object's pose with how far it may be off. Published for every IR frame, in every phase;
+/// in lockstep the planner acts on a frame only once it has the frame's estimate. Perceived
+/// from IR frames (readings, odometry, the overhead fix of the robot) and the planner's
+/// events alone: never from ground truth.
+///
+/// Two tracks of the object are kept. The *pose* (`pose`, `sigma_*`, `valid`) comes from
+/// matching the circled border to the learned shape S and is carried between circlings
+/// by the gradient's prediction of each announced push, corrected so that the object
+/// touches the robot where the push ended. The *centroid* (`centroid`, `centroid_sigma_m`,
+/// `object_radius_m`) needs no gradient: the centre of the area the circled border
+/// encloses, moved by the robot's own travel while it pushes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ObjectEstimate.v2")]
+#[type_name("agp::ObjectEstimate.v3")]
 pub struct ObjectEstimate {
     pub timing: TimingHeader,
     /// The step of the IR frame this estimate derives from.
     pub step: u64,
+    /// The robot's pose: odometry pulled towards each overhead fix (world frame).
+    pub robot: Pose2,
+    /// The object's pose (world frame), valid when `valid` is 1.
     pub pose: Pose2,
-    /// Standard deviations of the pose, metres and radians.
+    /// How far the pose may be off: a bound on the position error (m) and on the
+    /// orientation error (rad), 0 right after a match, growing with each push by a share
+    /// of its predicted motion and the prediction's spread; infinite once a push went
+    /// otherwise than predicted.
     pub sigma_xy: f64,
     pub sigma_theta: f64,
-    /// 1 if the pose is valid (the object has been found).
-    pub valid: u8,
-    /// 1 while contact with the object is inferred from the IR readings.
-    pub contact: u8,
-    /// The estimator's learning, an [`EstimatorLearning`] as u8.
-    pub learning: u8,
-    pub _pad: [u8; 5],
-    /// The inferred contact point (odometry frame), valid when `contact` is 1.
+    /// The gradient-free track: the border's centroid (world frame), its error bound (m),
+    /// and the farthest circled border point from it, m.
+    pub centroid: [f64; 2],
+    pub centroid_sigma_m: f64,
+    pub object_radius_m: f64,
+    /// Gap (m) between the robot's shell and the nearest thing its front sensors see; -1
+    /// when they see nothing.
+    pub front_gap_m: f64,
+    /// Where the robot's front meets the object, object frame (m), when `contact` is 1 and
+    /// the pose is valid.
     pub contact_point: [f64; 2],
+    /// The last match: RMS distance of the circled border to S (m), the share of the
+    /// circled points that fit, and how many matches this estimator has made (a new one:
+    /// a fresh pose).
+    pub match_rms_m: f64,
+    pub match_inliers: f64,
+    pub match_seq: u64,
+    /// Share of the object's border (by 10-degree sectors round the estimated centre)
+    /// the IR has seen since the last match, 0 to 1.
+    pub border_seen: f64,
     /// Bumped each time a new set of gradient grids is published.
     pub grids_seq: u64,
     /// When the estimator that sent it started (CLOCK_MONOTONIC, ns): a larger value than
     /// the one a reader knows means the estimator restarted (and lost what it learned).
     pub estimator_start_ns: u64,
+    /// 1 if `pose` is valid (the object was matched since the estimator started).
+    pub valid: u8,
+    /// 1 while the front gap is within the contact gap (10 mm: the object is against the
+    /// robot or about to be).
+    pub contact: u8,
+    /// The estimator's learning, an [`EstimatorLearning`] as u8.
+    pub learning: u8,
+    /// 1 if the centroid track is valid.
+    pub centroid_valid: u8,
+    /// The rotational symmetry the estimator learned from S (0 a disc, 1 none, k: k-fold),
+    /// 255 while it has no gradient.
+    pub symmetry_order: u8,
+    pub _pad: [u8; 3],
+}
+
+impl ObjectEstimate {
+    /// The front gap, m, `None` when the front sensors see nothing.
+    pub fn front_gap(&self) -> Option<f64> {
+        (self.front_gap_m >= 0.0).then_some(self.front_gap_m)
+    }
 }
 
 /// What the estimator does about learning, as [`ObjectEstimate::learning`] tells it.
@@ -375,7 +423,10 @@ const _: () = {
     assert!(size_of::<MotorCommand>() == 72 + 40 && align_of::<MotorCommand>() == 8);
     assert!(size_of::<Reset>() == 72 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
-    assert!(size_of::<ObjectEstimate>() == 72 + 8 + 24 + 16 + 8 + 16 + 8 + 8);
+    assert!(
+        size_of::<ObjectEstimate>()
+            == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 8 + 8
+    );
     assert!(size_of::<GridHeader>() == 8 + 4 * 4 + 8 * 8 && align_of::<GridHeader>() == 8);
     assert!(size_of::<GradientGrid>() == 88 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
     assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
@@ -412,10 +463,25 @@ pub enum LearnEventKind {
     EvalEnd = 10,
     /// Benchmark: stop (the planner exits).
     Stop = 11,
+    /// Planner, in a task: a circling starts; the estimator gathers the border it sees.
+    TaskCircleBegin = 12,
+    /// Planner, in a task: the circling ended (`flag` 1 if its lap closed): the estimator
+    /// matches the gathered border to S (the next estimate has a new `match_seq` if it
+    /// matched) and takes its centroid.
+    TaskCircleEnd = 13,
+    /// Planner, in a task: contact is made and the push starts at the carried frame. With
+    /// `flag` 1 the push is the one planned on the gradient: its aim point `contact`
+    /// (object frame), `alpha_deg`, and `scale`, the share of the learned push's motion
+    /// it is expected to make; the estimator predicts the object's motion from them. With
+    /// `flag` 0 nothing is announced but the contact.
+    TaskPushBegin = 14,
+    /// Planner, in a task: the push is over and the object came to rest at the carried
+    /// frame: the estimator carries its tracks on by the push.
+    TaskPushEnd = 15,
 }
 
 impl LearnEventKind {
-    pub const ALL: [LearnEventKind; 12] = [
+    pub const ALL: [LearnEventKind; 16] = [
         Self::ShapeBegin,
         Self::ShapeEnd,
         Self::TrialBegin,
@@ -428,6 +494,10 @@ impl LearnEventKind {
         Self::EvalContact,
         Self::EvalEnd,
         Self::Stop,
+        Self::TaskCircleBegin,
+        Self::TaskCircleEnd,
+        Self::TaskPushBegin,
+        Self::TaskPushEnd,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -441,7 +511,7 @@ impl LearnEventKind {
 /// next frame, so a reader that drains events before each frame sees them in order.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::LearnEvent.v2")]
+#[type_name("agp::LearnEvent.v3")]
 pub struct LearnEvent {
     /// Running count of the sender's events.
     pub seq: u64,
@@ -469,6 +539,10 @@ pub struct LearnEvent {
     pub ir_sample: u64,
     pub ir_raw: [f32; IR_SENSOR_COUNT],
     pub odometry: Pose2,
+    /// [`LearnEventKind::TaskPushBegin`]: the planned aim point (object frame, m) and the
+    /// share of the learned push's motion expected.
+    pub contact: [f64; 2],
+    pub scale: f64,
 }
 
 /// What a [`LearnReport`] says.
@@ -543,7 +617,7 @@ pub struct LearnReport {
 const _: () = {
     use core::mem::{align_of, size_of};
     assert!(
-        size_of::<LearnEvent>() == 8 + 8 + 16 + 8 + 16 + 24 + 8 + 32 + 24
+        size_of::<LearnEvent>() == 8 + 8 + 16 + 8 + 16 + 24 + 8 + 32 + 24 + 24
             && align_of::<LearnEvent>() == 8
     );
     assert!(

@@ -11,6 +11,7 @@ mod grid_set_assembler;
 mod push_predictor;
 mod shape_matcher;
 mod simd;
+mod symmetry;
 
 pub use affordance_gradient::{
     AIM_BORDER_THRESHOLD, AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE,
@@ -30,5 +31,10 @@ pub use grid_set_assembler::{GradientFromGridsError, GridSetAssembler};
 pub use push_predictor::{PushPredictor, approach_start, border_crossing};
 pub use shape_matcher::{
     MIN_MATCH_POINTS, MatchMethod, MatchedPose, ShapeMatch, ShapeMatchError, ShapeMatcher,
-    ShapeMatcherBuildError, ShapeMatcherConfig,
+    ShapeMatcherBuildError, ShapeMatcherConfig, learned_border_radius_m,
+};
+pub use symmetry::{
+    DISC_RADIUS_RMS_M, MAX_SYMMETRY_ORDER, MIN_BORDER_COVERAGE, MIN_ROTATION_OVERLAP,
+    SYMMETRY_MATCH_THRESHOLD, SYMMETRY_SHIFT_TOLERANCE_M, SymmetryEstimate, estimate_symmetry,
+    shape_radius_m, symmetry_order_of,
 };

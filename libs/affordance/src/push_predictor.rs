@@ -1,3 +1,5 @@
+use std::borrow::Cow;
+
 use glam::DVec2;
 
 use crate::affordance_gradient::ALPHA_EPS_DEG;
@@ -23,8 +25,9 @@ use crate::{AIM_BORDER_THRESHOLD, AffordanceGradient, Grid, Prediction};
 #[derive(Debug, Clone)]
 pub struct PushPredictor<'a> {
     ag: &'a AffordanceGradient,
-    /// S over all alphas, normalised: where aim points are located.
-    shape: Grid,
+    /// S over all alphas, normalised: where aim points are located (owned, or borrowed
+    /// from a caller that keeps it, see [`PushPredictor::borrowing`]).
+    shape: Cow<'a, Grid>,
     start_radius_m: f64,
 }
 
@@ -34,7 +37,19 @@ impl<'a> PushPredictor<'a> {
     pub fn new(ag: &'a AffordanceGradient, start_radius_m: f64) -> Self {
         Self {
             ag,
-            shape: ag.combined_shape(),
+            shape: Cow::Owned(ag.combined_shape()),
+            start_radius_m,
+        }
+    }
+
+    /// A predictor that locates aim points on `shape`, borrowed: `ag.combined_shape()` kept
+    /// by the caller (or another normalised S in the gradient's frame, as for
+    /// [`PushPredictor::with_shape`]). Allocates nothing: a caller that keeps the gradient
+    /// and its shape can build one per push.
+    pub fn borrowing(ag: &'a AffordanceGradient, shape: &'a Grid, start_radius_m: f64) -> Self {
+        Self {
+            ag,
+            shape: Cow::Borrowed(shape),
             start_radius_m,
         }
     }
@@ -44,7 +59,7 @@ impl<'a> PushPredictor<'a> {
     pub fn with_shape(ag: &'a AffordanceGradient, shape: Grid, start_radius_m: f64) -> Self {
         Self {
             ag,
-            shape,
+            shape: Cow::Owned(shape),
             start_radius_m,
         }
     }

@@ -981,6 +981,23 @@ fn validate(c: &ShapeMatcherConfig) -> Result<(), ShapeMatcherBuildError> {
     Ok(())
 }
 
+/// The radius of the learned border of `shape` (a normalised or unnormalised S): the
+/// farthest ridge point above the default matcher's threshold (0.3 of S's largest value)
+/// from the object frame's origin, m. What the shape matcher's border reaches, learned from
+/// IR alone: where pushes start is set from it. `None` for an S without a border.
+pub fn learned_border_radius_m(shape: &Grid) -> Option<f64> {
+    let max = shape.max();
+    if max <= 0.0 {
+        return None;
+    }
+    let threshold = ShapeMatcherConfig::default().border_threshold * max;
+    let r = ridge_points(shape, threshold)
+        .iter()
+        .map(|p| p.length())
+        .fold(0.0, f64::max);
+    (r > 0.0).then_some(r)
+}
+
 /// The ridge of `s` above `threshold`: cells that are a maximum of `s` along the direction
 /// of its strongest negative curvature (the Hessian's eigenvector), moved to the peak of
 /// the parabola through that direction's three samples (object frame, metres).

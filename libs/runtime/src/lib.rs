@@ -4,6 +4,7 @@
 //! those names, with one quality of service per topic, for every process of an instance.
 
 pub mod alloc_count;
+pub mod children;
 pub mod control_client;
 mod driver;
 mod instance;

@@ -1,7 +1,14 @@
-//! The estimator process: learns the object's affordance gradients from IR frames and the planner's learning events, and publishes them zero-copy.
+//! The estimator process: perceives the robot and the object from IR frames, learns the object's affordance gradients, and publishes both zero-copy.
 //!
+//! Perception, in every phase: for each IR frame it publishes an [`ObjectEstimate`] (the
+//! robot's fused pose, the front gap and contact, and in a task the object's pose by
+//! matching the circled border to the learned shape and tracking it through the pushes
+//! the planner announces, see [`agp_perception::ObjectTracker`]); the planner acts on a
+//! frame only once it has the frame's estimate.
+//!
+//! Learning:
 //! It reads IR frames (readings and odometry: never ground truth) and the planner's
-//! [`LearnEvent`]s, feeds an [`agp_estimator::LearningSession`], reports each trial on the
+//! [`LearnEvent`]s, feeds an [`agp_perception::LearningSession`], reports each trial on the
 //! learn reports topic and acknowledges every frame with an [`ObjectEstimate`] of the same
 //! publish stamp (the planner in `learn` mode waits for it, so no frame is lost). When the
 //! planner says learning is done it writes every grid (per alpha the paper's S, Px, Py, R+,
@@ -17,7 +24,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
-use agp_estimator::{IrView, LearningConfig, LearningSession, TrialPhase};
+use agp_perception::{
+    IrView, LearningConfig, LearningSession, ObjectTracker, TrackerConfig, TrialPhase,
+};
 use agp_runtime::{
     AgpIpc, Instance, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
 };
@@ -210,6 +219,13 @@ struct State {
     start_ns: u64,
     /// The scenario learned, for a session started over.
     scenario: Scenario,
+    /// Perception: the robot, contact, and the object in a task.
+    tracker: ObjectTracker,
+    /// The newest planner session whose task events the tracker takes (a planner swapped
+    /// in supersedes the one it replaces).
+    task_session: u64,
+    /// Step of the last frame observed (a smaller one: physics restarted).
+    last_step: Option<u64>,
 }
 
 fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -283,6 +299,9 @@ impl Estimator {
             learn_session: 0,
             start_ns: monotonic_ns(),
             scenario: scenario.clone(),
+            tracker: ObjectTracker::new(&RobotDescription::epuck(), TrackerConfig::default()),
+            task_session: 0,
+            last_step: None,
         };
         // Frames and learn events notify the same event service.
         let listener = frames
@@ -364,6 +383,12 @@ impl Estimator {
         }
         let _ = self.grids_wake.notify();
         self.state.grids_seq = seq;
+        if let Err(e) = self.state.tracker.set_gradient(gradient) {
+            eprintln!(
+                "agp-estimator: the gradient of `{}` cannot locate the object in a task: {e}",
+                self.object
+            );
+        }
         Ok(())
     }
 
@@ -496,6 +521,21 @@ impl State {
             any = true;
             let received = monotonic_ns();
             self.drain_events()?;
+            {
+                let _in_perception = alloc_count::enter(alloc_count::Region::Work);
+                if self.last_step.is_some_and(|last| frame.step < last) {
+                    // Physics restarted: a new world, the object no longer where it was.
+                    self.tracker.reset();
+                }
+                self.last_step = Some(frame.step);
+                self.tracker.observe(
+                    frame.ir_sample,
+                    &frame.ir_raw,
+                    frame.odometry,
+                    frame.fix,
+                    frame.fix_seq,
+                );
+            }
             if let Some(s) = &mut self.session {
                 let _in_learning = alloc_count::enter(alloc_count::Region::Work);
                 s.observe(&IrView::from(&frame));
@@ -537,6 +577,7 @@ impl State {
             estimator_start_ns: self.start_ns,
             ..ObjectEstimate::default()
         };
+        self.tracker.write_estimate(&mut e);
         e.timing.trace_id = frame.timing.trace_id;
         e.timing.stamps_ns[stage::FRAME_PUBLISHED] = frame.timing.stamps_ns[stage::FRAME_PUBLISHED];
         e.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] = received_ns;
@@ -591,6 +632,21 @@ impl State {
             eprintln!("agp-estimator: unknown learn event kind {}", event.kind);
             return Ok(());
         };
+        if matches!(
+            kind,
+            LearnEventKind::TaskCircleBegin
+                | LearnEventKind::TaskCircleEnd
+                | LearnEventKind::TaskPushBegin
+                | LearnEventKind::TaskPushEnd
+        ) {
+            // A planner swapped in beside a running one sends with a newer session: from
+            // its first event on, the old one's are stale.
+            if event.session >= self.task_session {
+                self.task_session = event.session;
+                self.tracker.handle(event);
+            }
+            return Ok(());
+        }
         if self.session.is_none() || kind as u32 > LearnEventKind::LearningDone as u32 {
             // Learning is over (or the gradients came from a file), or not a step of the
             // learning protocol.

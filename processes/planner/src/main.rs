@@ -2,11 +2,13 @@
 
 mod grid_link;
 mod learn_mode;
+mod ring;
 mod task_mode;
 
 use std::time::Duration;
 
-use agp_planner::{ContactSense, PlannerKind, PushPhase, PushRoutine, PushSettings};
+use agp_perception::ContactSense;
+use agp_planning::{PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
     AgpIpc, DriveError, Instance, LockstepDriver, alloc_count, install_shutdown_handler,
@@ -313,7 +315,12 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
                     );
                     return Ok(());
                 }
-                let (l, r) = routine.update(&sense, f.sim_time_s, f.ir_sample, &f.ir_raw);
+                let (l, r) = routine.update(
+                    sense.front_gap(&f.ir_raw),
+                    1.0 / sense.ir_rate_hz(),
+                    f.sim_time_s,
+                    f.ir_sample,
+                );
                 let next = driver.step(l, r)?;
                 if let Some(s) = swap_in.take() {
                     let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];

@@ -1,7 +1,7 @@
 //! `--mode place` and `--mode trajectory`: the paper's Algorithm 5 over the pipeline.
 //!
 //! The planner drives lockstep physics through [`LockstepDriver`] and runs one episode of
-//! [`agp_planner::drive_episode`] from wherever the robot and the object are: it finds the
+//! [`agp_planning::drive_episode`] from wherever the robot and the object are: it finds the
 //! object, estimates its pose by circling it (IR and odometry only), plans each push on the
 //! affordance gradient, pushes, carries the estimate on with the gradient's prediction and
 //! circles again when the estimate has drifted. The gradient comes from the estimator's
@@ -19,12 +19,11 @@
 use std::time::Duration;
 
 use agp_affordance::AffordanceGradient;
-use agp_planner::{
+use agp_planning::{
     EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
-    trajectory_path,
 };
 use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
-use agp_shared_types::{MAX_PATH_POINTS, Pose2, TaskKind, stage};
+use agp_shared_types::{LearnEvent, MAX_PATH_POINTS, ObjectEstimate, Pose2, TaskKind, stage};
 use agp_world::{Pose, RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
 use glam::DVec2;
@@ -33,6 +32,7 @@ use iceoryx2::prelude::Node;
 
 use crate::SwapIn;
 use crate::grid_link::GridLink;
+use crate::ring::{EstimatorLink, EstimatorRestarted, Ring};
 
 /// What `--mode place` and `--mode trajectory` were asked to do.
 #[derive(Debug, Clone)]
@@ -50,17 +50,21 @@ pub struct TaskSettings {
     pub trace: bool,
 }
 
-/// The robot through lockstep physics: one command per physics step.
+/// The robot through the ring: one command per physics step, each frame acted on once the
+/// estimator's estimate of it is in.
 struct PipelineWorld {
-    driver: LockstepDriver,
+    ring: Ring,
     /// Ground truth is read only for the oracle.
     oracle: bool,
     swap_in: Option<SwapIn>,
+    /// This planner's epoch: its events supersede those of an older planner still running
+    /// during a swap.
+    epoch: u64,
 }
 
 impl World for PipelineWorld {
     fn senses(&self) -> Senses {
-        let f = self.driver.frame();
+        let f = self.ring.driver.frame();
         Senses {
             ir_raw: f.ir_raw,
             ir_sample: f.ir_sample,
@@ -70,19 +74,35 @@ impl World for PipelineWorld {
         }
     }
 
+    fn perceived(&self) -> &ObjectEstimate {
+        self.ring.estimate()
+    }
+
+    fn tell(&mut self, mut event: LearnEvent) -> Result<(), WorldStepError> {
+        event.session = self.epoch + 1;
+        self.ring
+            .send(event)
+            .map_err(|e| WorldStepError::Link(format!("{e:#}")))
+    }
+
     fn sim_time(&self) -> f64 {
-        self.driver.frame().sim_time_s
+        self.ring.driver.frame().sim_time_s
     }
 
     fn step_count(&self) -> u64 {
-        self.driver.frame().step
+        self.ring.driver.frame().step
     }
 
     fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), WorldStepError> {
-        let next = self.driver.step(left_mps, right_mps).map_err(|e| match e {
-            DriveError::Shutdown => WorldStepError::Shutdown,
-            DriveError::PhysicsRestarted => WorldStepError::Restarted,
-            e => WorldStepError::Link(e.to_string()),
+        let next = self.ring.step(left_mps, right_mps).map_err(|e| {
+            match e.downcast_ref::<DriveError>() {
+                Some(DriveError::Shutdown) => WorldStepError::Shutdown,
+                Some(DriveError::PhysicsRestarted) => WorldStepError::Restarted,
+                _ if e.is::<EstimatorRestarted>() => WorldStepError::Link(
+                    "the estimator restarted: it lost the object it tracked".into(),
+                ),
+                _ => WorldStepError::Link(format!("{e:#}")),
+            }
         })?;
         if let Some(s) = self.swap_in.take() {
             let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
@@ -93,7 +113,7 @@ impl World for PipelineWorld {
     }
 
     fn object_truth(&self) -> Option<Pose> {
-        self.oracle.then(|| self.driver.truth().object)
+        self.oracle.then(|| self.ring.driver.truth().object)
     }
 }
 
@@ -101,7 +121,7 @@ impl World for PipelineWorld {
 pub fn task_of(scenario: &Scenario, kind: TaskKind, goal: Option<Pose2>) -> Task {
     match kind {
         TaskKind::Trajectory => Task::Trajectory {
-            path: trajectory_path(scenario),
+            path: scenario.task.path.clone(),
         },
         _ => {
             let g = scenario.task.goal;
@@ -156,6 +176,7 @@ pub fn run(
         Err(e) => return Err(e).context("cannot reach physics"),
     };
     let _task = publish_task(instance, scenario, &settings.task)?;
+    let link = EstimatorLink::open(instance, settings.timeout)?;
     let swap_in = match SwapIn::start(instance, &mut driver) {
         Ok(s) => s,
         Err(e) if agp_runtime::shutdown_requested() => {
@@ -164,10 +185,19 @@ pub fn run(
         }
         Err(e) => return Err(e),
     };
+    let ring = match Ring::new(driver, link) {
+        Ok(r) => r,
+        Err(e) if agp_runtime::shutdown_requested() => {
+            let _ = e;
+            return Ok(None);
+        }
+        Err(e) => return Err(e).context("waiting for the estimator's first estimate"),
+    };
     let mut world = PipelineWorld {
-        driver,
+        ring,
         oracle: settings.planner.reads_ground_truth(),
         swap_in,
+        epoch: settings.epoch,
     };
     let config = EpisodeConfig {
         trace: settings.trace,
@@ -204,7 +234,6 @@ pub fn run(
         }
         let outcome = drive_episode(
             &mut world,
-            scenario,
             &robot,
             gradient.as_ref(),
             settings.planner,
@@ -230,8 +259,8 @@ pub fn run(
                 );
                 return Ok(Some(r));
             }
-            Err(agp_planner::EpisodeRunError::World(WorldStepError::Shutdown)) => return Ok(None),
-            Err(agp_planner::EpisodeRunError::World(WorldStepError::Restarted)) => {
+            Err(agp_planning::EpisodeRunError::World(WorldStepError::Shutdown)) => return Ok(None),
+            Err(agp_planning::EpisodeRunError::World(WorldStepError::Restarted)) => {
                 // A new world from the scenario's start: the episode starts over, finding
                 // the object first.
                 println!("planner: physics restarted: the episode starts over");

@@ -39,7 +39,8 @@ use iceoryx2::prelude::{CallbackProgression, Node};
 use agp_supervisor::LaunchConfig;
 
 use crate::rates::MessageRates;
-use crate::up::{Log, RunEnd, Slot, SlotState, describe, signal_group, spawn_process};
+use crate::up::{Log, RunEnd, Slot, SlotState, describe, spawn_process};
+use agp_runtime::children::signal_group;
 
 /// How long a swapped-in process may take to become ready, and then to drive, unless the
 /// request says otherwise.

@@ -40,8 +40,7 @@ use toml::Spanned;
 /// Names `scenario` may take without being a file.
 pub use agp_world::BUILTIN_NAMES as BUILTIN_SCENARIOS;
 
-/// Default physics rate, in steps per second.
-pub const DEFAULT_RATE_HZ: f64 = 640.0;
+pub use agp_shared_types::DEFAULT_RATE_HZ;
 
 /// Default delay between SIGTERM and SIGKILL when a process is stopped.
 pub const DEFAULT_STOP_GRACE: Duration = Duration::from_secs(3);

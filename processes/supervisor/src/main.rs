@@ -1,14 +1,9 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
-mod bench_learn;
-mod bench_paper;
-mod bench_tasks;
-mod children;
+use agp_harness::{bench_learn, bench_paper, bench_tasks, probe};
+
 mod control;
 mod control_plane;
-mod evaluation;
-mod pipeline_bench;
-mod probe;
 mod profile;
 mod rates;
 mod signals;

@@ -733,8 +733,8 @@ fn run_floor(seconds: f64, waiting: WaitStrategy, pause: Option<&Instance>) -> R
             .env(WaitStrategy::ENV, waiting.name())
             .stdin(Stdio::null());
         // It dies with the profiler, however the profiler ends.
-        let child =
-            crate::up::spawn_guarded(&mut cmd).context("cannot start the floor's pong side")?;
+        let child = agp_runtime::children::spawn_guarded(&mut cmd)
+            .context("cannot start the floor's pong side")?;
         let mut child = KillOnDrop(child);
         let floor = ping(&ports, seconds, pause);
         // Stop the pong side however the ping ended; it also times out on its own.

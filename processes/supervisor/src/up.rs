@@ -2,7 +2,7 @@
 //! processes, and the removal of every file it leaves.
 
 use std::io::Write;
-use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::os::unix::process::ExitStatusExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -20,8 +20,9 @@ use iceoryx2::prelude::{CallbackProgression, Node};
 use agp_world::Scenario;
 
 use crate::control_plane::ControlPlane;
-use crate::evaluation::{self, RunJudge};
 use crate::signals;
+use agp_harness::evaluation::{self, RunJudge};
+use agp_runtime::children::{signal_group, spawn_guarded};
 
 /// How often the supervisor looks at its children and its signal flags.
 const POLL: Duration = Duration::from_millis(10);
@@ -616,45 +617,12 @@ fn run_session_key() -> std::io::Result<agp_shared_types::SessionKey> {
     Ok(*KEY.get_or_init(|| key))
 }
 
-/// Spawns `cmd` in a process group of its own, killed by the kernel if `agp` dies.
-pub(crate) fn spawn_guarded(cmd: &mut Command) -> std::io::Result<Child> {
-    cmd.process_group(0);
-    let parent = libc::pid_t::try_from(std::process::id()).unwrap_or(0);
-    // SAFETY: between fork and exec only async-signal-safe calls: prctl, getppid, _exit.
-    unsafe {
-        cmd.pre_exec(move || {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-            // The supervisor died before prctl took effect: nobody would ever stop us.
-            if libc::getppid() != parent {
-                libc::_exit(1);
-            }
-            Ok(())
-        });
-    }
-    cmd.spawn()
-}
-
 /// How a process ended, for status lines.
 pub(crate) fn describe(status: ExitStatus) -> String {
     match (status.code(), status.signal()) {
         (Some(code), _) => format!("exited with status {code}"),
         (None, Some(sig)) => format!("was killed by {}", signals::name(sig)),
         (None, None) => format!("ended ({status})"),
-    }
-}
-
-/// Sends `signal` to the process group of `child` (the child and anything it started).
-pub(crate) fn signal_group(child: &Child, signal: libc::c_int) {
-    let Ok(pid) = libc::pid_t::try_from(child.id()) else {
-        return;
-    };
-    // SAFETY: plain kill(2); the child is not reaped yet, so its pid is still ours.
-    unsafe {
-        if libc::kill(-pid, signal) != 0 {
-            libc::kill(pid, signal);
-        }
     }
 }
 

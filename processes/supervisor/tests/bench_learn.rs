@@ -1,15 +1,11 @@
 //! `agp bench learn` (src/bench_learn.rs), called through its clap arguments in-process on
 //! a quick protocol: what a user and the scripts reading the JSON rely on.
 
-#[path = "../src/bench_learn.rs"]
-#[allow(dead_code, reason = "the `agp` binary uses the rest of the module")]
-mod bench_learn;
-
 use std::path::Path;
 use std::process::ExitCode;
 
 use agp_affordance::AffordanceGradient;
-use bench_learn::{BenchLearnArgs, run};
+use agp_harness::bench_learn::{BenchLearnArgs, run};
 use clap::Parser;
 use serde_json::Value;
 

@@ -1,0 +1,1353 @@
+//! One episode of a task against an in-process [`Sim`]: the paper's Algorithm 5
+//! (benchPusher) for the `affordance` and `oracle` planners, and the centroid-pushing
+//! `baseline`.
+//!
+//! ```text
+//! findObj; e <- EstimatePose            (approach, circle by the side IR, match S)
+//! while not done(e):                    (judged on a fresh estimate)
+//!     P <- planBestPush(A, e, goal)     (PushPlanner: contact x alpha x push length;
+//!                                        trajectory: a centroid push steered by the AG)
+//!     travel round to P's start; push   (orbit, never touching; IR-inferred contact)
+//!     e <- updateEstimate(e, A)         (the AG's prediction, corrected so that the
+//!                                        object touches the robot where it stopped)
+//!     if the accumulated error calls for it, or the push surprised: e <- EstimatePose
+//! ```
+//!
+//! A push surprises when it ends without the IR seeing the object just ahead, or when
+//! the prediction would need more than 15 mm of correction to touch the robot. Pushes
+//! that leave the object where it was (a short push stopping short of it) are followed
+//! by a full one.
+//!
+//! The planner decides; the estimator perceives. Every estimate the planner acts on (the
+//! robot's pose, the front gap, the object's pose and how far it may be off, the border's
+//! centroid) is the estimator's, read from [`World::perceived`]; the planner tells the
+//! estimator what it does (a circling starts and ends, a push starts with its plan and
+//! ends) with [`World::tell`]. The circling routine steers by the side IR itself: that is
+//! driving, not perceiving.
+//!
+//! Only the recorded true poses (for the judge), the development trace and the `oracle`
+//! read ground truth: the `affordance` and `baseline` planners see the estimator's
+//! estimates and the IR readings, nothing else.
+
+use agp_shared_types::angle;
+use std::time::Instant;
+
+use agp_affordance::{AffordanceGradient, Prediction, learned_border_radius_m, symmetry_order_of};
+use agp_shared_types::{LearnEvent, LearnEventKind, Pose2};
+use agp_world::{Pose, RobotDescription, Scenario};
+use glam::DVec2;
+
+use crate::{
+    CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, Goal, PushChoiceSettings, PushPhase,
+    PushPlanner, PushRoutine, PushSettings, TravelPhase, TravelRoutine, TravelSettings, World,
+    WorldStepError, orbit_waypoints_into, symmetric_angle_error,
+};
+
+/// Which planner runs an episode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum PlannerKind {
+    /// The paper's: the learned AG, the object's pose from IR only.
+    Affordance,
+    /// No AG: pushes through the estimated centroid towards the goal; the centroid from
+    /// the circled border (IR only), moved by the robot's own travel while it pushes.
+    Baseline,
+    /// The affordance planner fed the object's true pose before every push: an upper
+    /// bound, and the only planner that reads ground truth.
+    Oracle,
+}
+
+impl PlannerKind {
+    /// All planners, in report order.
+    pub const ALL: [Self; 3] = [Self::Affordance, Self::Baseline, Self::Oracle];
+
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Affordance => "affordance",
+            Self::Baseline => "baseline",
+            Self::Oracle => "oracle",
+        }
+    }
+
+    /// Whether the planner reads ground truth (only the oracle).
+    pub fn reads_ground_truth(self) -> bool {
+        self == Self::Oracle
+    }
+
+    /// Whether the planner needs an affordance gradient.
+    pub fn needs_gradient(self) -> bool {
+        self != Self::Baseline
+    }
+}
+
+impl std::fmt::Display for PlannerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A planner name that is none of `affordance`, `baseline`, `oracle`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown planner `{0}` (planners: affordance, baseline, oracle)")]
+pub struct PlannerParseError(pub String);
+
+impl std::str::FromStr for PlannerKind {
+    type Err = PlannerParseError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == s.trim())
+            .ok_or_else(|| PlannerParseError(s.to_owned()))
+    }
+}
+
+/// What an episode is after.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Task {
+    /// The object's centroid at the goal's position, its orientation at the goal's
+    /// (modulo the object's symmetry), world frame.
+    Place { goal: Pose2 },
+    /// The centroid along this polyline (world frame, m) to its end.
+    Trajectory { path: Vec<DVec2> },
+}
+
+/// How an episode runs. [`EpisodeConfig::for_scenario`] gives the defaults.
+#[derive(Debug, Clone)]
+pub struct EpisodeConfig {
+    /// Approach and push; `push_duration` is the learned push's (the AG predicts that
+    /// push; shorter pushes are fractions of it).
+    pub push: PushSettings,
+    /// The circling that estimates the object's pose.
+    pub circle: CircleSettings,
+    /// The travel round the object between pushes.
+    pub travel: TravelSettings,
+    /// Gap (m) between the robot's shell and the object's farthest learned point at a
+    /// push's start: the learning trials' (20 mm).
+    pub start_gap_m: f64,
+    /// After a push the robot backs off this long (s) at `backoff_speed` (m/s).
+    pub backoff_s: f64,
+    pub backoff_speed: f64,
+    /// How far each overhead fix pulls the robot's pose estimate, in (0, 1].
+    pub fix_gain: f64,
+    /// Success: position within this (m) and orientation within `tolerance_rad`.
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+    /// Give up after this many pushes.
+    pub max_pushes: u32,
+    /// Re-estimate by circling after at most this many pushes.
+    pub max_pushes_between_estimates: u32,
+    /// Each push adds to the estimate's error bound this fraction of its predicted motion
+    /// (displacement and rotation), plus the prediction's spread, plus the floors below.
+    pub error_growth: f64,
+    pub error_floor_m: f64,
+    pub error_floor_rad: f64,
+    /// Re-estimate when the error bound exceeds the tolerance or this fraction of what
+    /// is left to do (the distance to the target, the orientation error), whichever is
+    /// larger: far from the goal a rough estimate does.
+    pub reestimate_fraction: f64,
+    /// Farther than this (m) from the goal, the orientation's error bound does not call
+    /// for a circling.
+    pub orientation_matters_within_m: f64,
+    /// Correct each prediction so that the object's learned border touches the robot's
+    /// body where the robot stopped pushing (odometry).
+    pub contact_correction: bool,
+    /// Trajectory: the target is this far (m) ahead along the path of the centroid's
+    /// projection on it.
+    pub lookahead_m: f64,
+    /// While the robot pushes, the object's true pose is recorded every this many physics
+    /// steps (for the evaluation and the plots).
+    pub record_every_steps: u64,
+    /// Give up after this much simulated time, s.
+    pub max_sim_time_s: f64,
+    /// Seed of the simulator's sensor noise.
+    pub seed: u64,
+    /// Overrides of the push choice's defaults ([`PushChoiceSettings::new`]): risk
+    /// aversion, the turn penalty when only the position matters, the push lengths tried.
+    pub spread_weight: f64,
+    pub reach_rotation_weight_m_per_rad: f64,
+    pub push_fractions: Vec<f64>,
+    /// Alphas tried, every this many degrees across the learned ones (the AG interpolates
+    /// between learned alphas, worse than it predicts at them).
+    pub alpha_step_deg: f64,
+    /// Trajectory: the affordance planner pushes through the centroid, steered by the AG
+    /// (see `plan_steered`), instead of searching every push for the lookahead point.
+    pub steer_centroid_pushes: bool,
+    /// Largest angle (deg) between a steered push and the target's direction.
+    pub steer_max_deg: f64,
+    /// Stop when the estimate is within this fraction of the tolerance (the estimate has
+    /// errors of its own; 1 stops at the tolerance)...
+    pub stop_margin: f64,
+    /// ...plus this much per push made near the target (within twice the tolerance),
+    /// up to 1.
+    pub stop_margin_relax: f64,
+    /// Print each estimate and push on stderr (development aid).
+    pub trace: bool,
+}
+
+impl EpisodeConfig {
+    /// The defaults for `scenario`: its tolerance, pushes and seed; the learning
+    /// protocol's push (0.5 s at 100 mm/s after an IR-inferred contact).
+    pub fn for_scenario(scenario: &Scenario) -> Self {
+        Self {
+            push: PushSettings {
+                push_duration: 0.5,
+                ..PushSettings::default()
+            },
+            circle: CircleSettings::default(),
+            travel: TravelSettings::default(),
+            start_gap_m: 0.02,
+            backoff_s: 0.15,
+            backoff_speed: 0.08,
+            fix_gain: 0.3,
+            tolerance_m: scenario.task.tolerance_m,
+            tolerance_rad: scenario.task.tolerance_rad,
+            max_pushes: scenario.task.max_pushes,
+            max_pushes_between_estimates: 5,
+            error_growth: 0.15,
+            error_floor_m: 0.001,
+            error_floor_rad: 1f64.to_radians(),
+            reestimate_fraction: 0.3,
+            orientation_matters_within_m: 0.1,
+            contact_correction: true,
+            lookahead_m: 0.04,
+            record_every_steps: 32,
+            max_sim_time_s: 3000.0,
+            seed: scenario.task.seed,
+            spread_weight: 1.0,
+            reach_rotation_weight_m_per_rad: 0.03,
+            push_fractions: vec![1.0, 0.5, 0.25],
+            alpha_step_deg: 2.5,
+            steer_centroid_pushes: true,
+            steer_max_deg: 10.0,
+            stop_margin: 0.7,
+            stop_margin_relax: 0.02,
+            trace: false,
+        }
+    }
+}
+
+/// Why an episode ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpisodeEnd {
+    /// The planner's estimate says the task is done.
+    Done,
+    /// `max_pushes` pushes were used.
+    MaxPushes,
+    /// `max_sim_time_s` passed.
+    TimeLimit,
+    /// The robot lost the object: no circling found it.
+    Lost,
+}
+
+impl EpisodeEnd {
+    /// Every end, in declaration order.
+    pub const ALL: [Self; 4] = [Self::Done, Self::MaxPushes, Self::TimeLimit, Self::Lost];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Done => "done",
+            Self::MaxPushes => "max pushes",
+            Self::TimeLimit => "time limit",
+            Self::Lost => "lost",
+        }
+    }
+}
+
+/// The object's true pose at one moment (evaluation only).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseSample {
+    /// Simulated time, s.
+    pub t_s: f64,
+    pub pose: Pose2,
+}
+
+/// How an episode ended by ground truth: the evaluation, which only a world offering the
+/// true pose (the in-process physics, the oracle's link) can make.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    /// Place: the final true pose within the tolerance. Trajectory: the end reached
+    /// (the true centroid within the tolerance of the path's end).
+    pub success: bool,
+    /// Place: distance from the goal; trajectory: from the path's end, mm.
+    pub position_error_mm: f64,
+    /// Place: orientation error modulo the symmetry, deg (0 for a trajectory).
+    pub orientation_error_deg: f64,
+    /// The object's true pose at the start, every `record_every_steps` steps while the
+    /// robot pushes, and at the end.
+    pub samples: Vec<PoseSample>,
+}
+
+impl Evaluation {
+    /// Judges the object's final true pose `truth` against `task` with the tolerances of
+    /// `config`, orientation modulo the object's symmetry of `order`.
+    pub fn judge(
+        task: &Task,
+        truth: Pose2,
+        order: u32,
+        config: &EpisodeConfig,
+        samples: Vec<PoseSample>,
+    ) -> Self {
+        let (ep, eo, success) = match task {
+            Task::Place { goal } => {
+                let ep = DVec2::new(truth.x - goal.x, truth.y - goal.y).length();
+                let eo = symmetric_angle_error(truth.theta - goal.theta, order).abs();
+                (
+                    ep,
+                    eo,
+                    ep <= config.tolerance_m && eo <= config.tolerance_rad,
+                )
+            }
+            Task::Trajectory { path } => {
+                let end = path.last().copied().unwrap_or_default();
+                let ep = (DVec2::new(truth.x, truth.y) - end).length();
+                (ep, 0.0, ep <= config.tolerance_m)
+            }
+        };
+        Self {
+            success,
+            position_error_mm: ep * 1e3,
+            orientation_error_deg: eo.to_degrees(),
+            samples,
+        }
+    }
+}
+
+/// What an episode did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeResult {
+    pub planner: PlannerKind,
+    pub end: EpisodeEnd,
+    pub pushes: u32,
+    /// Circlings that estimated the object's pose (0 for the oracle).
+    pub circlings: u32,
+    /// Simulated time the episode took, s.
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    /// The planner's last estimate of the object's pose (world frame); the true pose for
+    /// the oracle. `None` if the object was never found.
+    pub final_estimate: Option<Pose2>,
+    /// The evaluation against ground truth: [`EpisodeResult::judged`] makes it, where the
+    /// world offers ground truth.
+    pub evaluation: Option<Evaluation>,
+    /// The object's true pose recorded while the robot pushed, and at the end, where the
+    /// world offers ground truth (for the judge).
+    pub samples: Vec<PoseSample>,
+    pub final_truth: Option<Pose2>,
+}
+
+impl EpisodeResult {
+    /// The episode judged by ground truth (the recorded samples and the final true pose),
+    /// orientation modulo the object's true symmetry `true_order`: the judge's call, with
+    /// the truth only it may read. Unchanged without ground truth.
+    pub fn judged(mut self, task: &Task, true_order: u32, config: &EpisodeConfig) -> Self {
+        if let Some(truth) = self.final_truth {
+            let samples = std::mem::take(&mut self.samples);
+            self.evaluation = Some(Evaluation::judge(task, truth, true_order, config, samples));
+        }
+        self
+    }
+
+    /// The evaluation's success (`false` without one).
+    pub fn success(&self) -> bool {
+        self.evaluation.as_ref().is_some_and(|e| e.success)
+    }
+}
+
+/// Why an episode could not start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EpisodeRunError {
+    /// The affordance and oracle planners need an affordance gradient.
+    #[error("planner `{0}` needs an affordance gradient")]
+    NoGradient(PlannerKind),
+    /// The trajectory has fewer than two points.
+    #[error("a trajectory needs at least two points")]
+    ShortPath,
+    /// The gradient's learned shape S has no border: nothing to push against.
+    #[error("the affordance gradient's shape has no border")]
+    NoBorder,
+    /// The world stopped answering (shutdown, a restarted physics, a broken link).
+    #[error("the episode stopped: {0}")]
+    World(#[from] WorldStepError),
+}
+
+/// Drives one episode of `task` with `planner` in `world`, from wherever the robot and the
+/// object are (Algorithm 5 starts by finding the object). `ag` is required by the
+/// affordance and oracle planners; the object's symmetry and size are learned from its
+/// shape S. The result carries the true poses the world offers, for
+/// [`EpisodeResult::judged`].
+pub fn drive_episode<W: World>(
+    world: &mut W,
+    robot: &RobotDescription,
+    ag: Option<&AffordanceGradient>,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+) -> Result<EpisodeResult, EpisodeRunError> {
+    let wall = Instant::now();
+    if let Task::Trajectory { path } = task
+        && path.len() < 2
+    {
+        return Err(EpisodeRunError::ShortPath);
+    }
+    let (brain, order) = match (planner, ag) {
+        (PlannerKind::Baseline, _) => (Brain::Baseline { radius: None }, 1),
+        (_, None) => return Err(EpisodeRunError::NoGradient(planner)),
+        (_, Some(ag)) => {
+            let shape = ag.combined_shape();
+            let order = symmetry_order_of(&shape);
+            let radius = learned_border_radius_m(&shape).ok_or(EpisodeRunError::NoBorder)?;
+            let r = radius + robot.body_radius + config.start_gap_m;
+            let choice = PushChoiceSettings {
+                spread_weight: config.spread_weight,
+                reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
+                push_fractions: config.push_fractions.clone(),
+                alpha_step_deg: config.alpha_step_deg,
+                ..PushChoiceSettings::new(order, r)
+            };
+            let push_planner = PushPlanner::new(ag, choice);
+            let long_planner = PushPlanner::new(
+                ag,
+                PushChoiceSettings {
+                    push_fractions: vec![1.0],
+                    ..push_planner.settings().clone()
+                },
+            );
+            (
+                Brain::Gradient {
+                    planner: push_planner,
+                    long_planner,
+                    start_radius: r,
+                },
+                order,
+            )
+        }
+    };
+    let start_s = world.sim_time();
+    let mut run = Run {
+        ir_period_s: 1.0 / robot.ir_rate_hz,
+        robot: robot.clone(),
+        circling: CircleRoutine::new(config.circle, robot, start_s),
+        waypoints: Vec::new(),
+        config,
+        world,
+        samples: Vec::new(),
+        recording: false,
+        start_s,
+        event_seq: 0,
+    };
+    run.record();
+    let mut episode = Episode {
+        run,
+        brain,
+        planner,
+        task,
+        order,
+        pushes: 0,
+        near_pushes: 0,
+        planned_from: None,
+        push_longer: false,
+        circlings: 0,
+        last_estimate: None,
+    };
+    let end = episode.run()?;
+    let Episode {
+        mut run,
+        pushes,
+        circlings,
+        last_estimate,
+        ..
+    } = episode;
+    run.record();
+    let final_truth = run.world.object_truth();
+    Ok(EpisodeResult {
+        planner,
+        end,
+        pushes,
+        circlings,
+        sim_time_s: run.elapsed(),
+        wall_time_s: wall.elapsed().as_secs_f64(),
+        final_estimate: last_estimate,
+        evaluation: None,
+        samples: std::mem::take(&mut run.samples),
+        final_truth,
+    })
+}
+
+/// What a planner decides with.
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one per episode, built once; boxing buys nothing"
+)]
+enum Brain<'a> {
+    Gradient {
+        planner: PushPlanner<'a>,
+        /// The same with full pushes only (see `Episode::push_longer`).
+        long_planner: PushPlanner<'a>,
+        start_radius: f64,
+    },
+    Baseline {
+        /// The object's radius (m) from the first circling: farthest border point from the
+        /// estimated centroid.
+        radius: Option<f64>,
+    },
+}
+
+/// A push to make: where to start, the heading, how long to push, and (with an AG) the
+/// predicted effect.
+struct PushOrder {
+    /// A retry after pushes that left the object where it was: contact only from a small
+    /// front gap, not from a stalled one.
+    retry: bool,
+    start: Pose2,
+    duration: f64,
+    prediction: Option<Prediction>,
+    /// The push as the estimator predicts it, from the gradient: its aim point (object
+    /// frame), alpha (deg) and the share of the learned push's motion expected.
+    plan: Option<(DVec2, f64, f64)>,
+    /// Orbit radius round the estimated centroid, m.
+    orbit: f64,
+}
+
+/// The object's estimated pose and how far it may be off.
+#[derive(Debug, Clone, Copy)]
+struct Estimate {
+    pose: Pose2,
+    /// Bound on the position error, m, and the orientation error, rad.
+    error_m: f64,
+    error_rad: f64,
+    /// Pushes since the last circling.
+    pushes_since: u32,
+}
+
+impl Estimate {
+    fn fresh(pose: Pose2) -> Self {
+        Self {
+            pose,
+            error_m: 0.0,
+            error_rad: 0.0,
+            pushes_since: 0,
+        }
+    }
+
+    fn position(&self) -> DVec2 {
+        DVec2::new(self.pose.x, self.pose.y)
+    }
+}
+
+struct Episode<'a, W: World> {
+    run: Run<'a, W>,
+    brain: Brain<'a>,
+    planner: PlannerKind,
+    task: &'a Task,
+    order: u32,
+    pushes: u32,
+    circlings: u32,
+    /// Pushes made with the object estimated within twice the tolerance of the target.
+    near_pushes: u32,
+    /// The fresh estimate the last pushes were planned from.
+    planned_from: Option<Pose2>,
+    /// The last pushes left the object where it was (a short push that stopped short of
+    /// it): the next push is a full one.
+    push_longer: bool,
+    /// The latest estimate of the object's pose.
+    last_estimate: Option<Pose2>,
+}
+
+/// Converts the turn penalty (metres per radian of turn) of a steered push into radians
+/// of heading error: a heading error of e radians puts the centroid about e times this
+/// far off after a push.
+const STEER_LEVER_M: f64 = 0.05;
+
+/// Consecutive circlings that may fail before the object counts as lost.
+const MAX_FAILED_ESTIMATES: u32 = 3;
+
+impl<W: World> Episode<'_, W> {
+    fn run(&mut self) -> Result<EpisodeEnd, WorldStepError> {
+        let config = self.run.config;
+        let oracle = self.planner.reads_ground_truth();
+        // findObj + EstimateOrientationObj: the robot starts facing the object.
+        let mut est = if oracle {
+            Estimate::fresh(self.oracle_truth()?)
+        } else {
+            match self.estimate(None)? {
+                Some(e) => e,
+                None => return Ok(EpisodeEnd::Lost),
+            }
+        };
+        let mut failed = 0;
+        loop {
+            if oracle {
+                est = Estimate::fresh(self.oracle_truth()?);
+            }
+            self.last_estimate = Some(est.pose);
+            if est.pushes_since == 0
+                && let Some(before) = self.planned_from.take()
+            {
+                let moved = (est.position() - DVec2::new(before.x, before.y)).length();
+                let period = if self.order == 0 {
+                    f64::INFINITY
+                } else {
+                    std::f64::consts::TAU / f64::from(self.order)
+                };
+                let turned = angle::distance(est.pose.theta - before.theta, 0.0, period);
+                // A push that reaches the object moves it 9 mm or more; the estimates agree
+                // to a millimetre or two.
+                self.push_longer = moved < 0.003 && turned < 3f64.to_radians();
+                if self.push_longer {
+                    self.trace(format_args!("the last pushes left the object where it was"));
+                }
+            }
+            if self.done(&est) {
+                if est.pushes_since == 0 {
+                    return Ok(EpisodeEnd::Done);
+                }
+                match self.estimate(Some(est.pose))? {
+                    Some(e) => {
+                        est = e;
+                        failed = 0;
+                        continue;
+                    }
+                    None => {
+                        failed += 1;
+                        if failed >= MAX_FAILED_ESTIMATES {
+                            return Ok(EpisodeEnd::Lost);
+                        }
+                    }
+                }
+            }
+            if self.pushes >= config.max_pushes {
+                return Ok(EpisodeEnd::MaxPushes);
+            }
+            if self.run.elapsed() > config.max_sim_time_s {
+                return Ok(EpisodeEnd::TimeLimit);
+            }
+            let Some(order) = self.plan(&est) else {
+                return Ok(EpisodeEnd::Lost);
+            };
+            if est.pushes_since == 0 {
+                self.planned_from = Some(est.pose);
+            }
+            self.push_longer = false;
+            let (target, _) = self.target(&est);
+            if (est.position() - target).length() <= 2.0 * config.tolerance_m {
+                self.near_pushes += 1;
+            }
+            self.trace(format_args!(
+                "plan from ({:.1}, {:.1}) mm {:.1} deg for {:.2} s, predicted {:?}",
+                order.start.x * 1e3,
+                order.start.y * 1e3,
+                order.start.theta.to_degrees(),
+                order.duration,
+                order
+                    .prediction
+                    .map(|p| (p.displacement * 1e3, p.rotation_rad.to_degrees()))
+            ));
+            let mut touched = false;
+            if self.run.travel(est.position(), order.orbit, order.start)? {
+                let pushed =
+                    self.run
+                        .push(order.duration, order.orbit + 0.03, !order.retry, order.plan)?;
+                // The estimator carries its estimate on by the push on the first frame after
+                // it: read it once the robot is backing off.
+                self.run.backoff()?;
+                if let Some(done) = pushed {
+                    touched = true;
+                    self.pushes += 1;
+                    est = self.update(est, done);
+                }
+            }
+            if !touched {
+                self.trace(format_args!("no contact"));
+                // The object is not where the estimate says: find it again.
+                est.error_m = f64::INFINITY;
+            }
+            if self.needs_estimate(&est) {
+                match self.estimate(Some(est.pose))? {
+                    Some(e) => {
+                        est = e;
+                        failed = 0;
+                    }
+                    None => {
+                        failed += 1;
+                        if failed >= MAX_FAILED_ESTIMATES {
+                            return Ok(EpisodeEnd::Lost);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Development aid: one line on stderr, with the object's true pose for comparison
+    /// (read here only, never by a decision).
+    fn trace(&self, what: std::fmt::Arguments<'_>) {
+        if self.run.config.trace {
+            let truth = self.run.world.object_truth().map_or(String::new(), |t| {
+                format!(
+                    " [truth ({:.1}, {:.1}) mm {:.1} deg]",
+                    t.x * 1e3,
+                    t.y * 1e3,
+                    t.theta.to_degrees()
+                )
+            });
+            eprintln!(
+                "[{} t={:.1}s push {}] {what}{truth}",
+                self.planner,
+                self.run.world.sim_time(),
+                self.pushes,
+            );
+        }
+    }
+
+    /// The object's true pose: the oracle's input, and nobody else's.
+    fn oracle_truth(&self) -> Result<Pose2, WorldStepError> {
+        debug_assert!(self.planner.reads_ground_truth());
+        let p = self.run.world.object_truth().ok_or_else(|| {
+            WorldStepError::Link(
+                "the oracle needs the object's true pose, which this world does not offer".into(),
+            )
+        })?;
+        Ok(p)
+    }
+
+    /// The point the centroid should head for, and whether the task is done, by `est`.
+    fn target(&self, est: &Estimate) -> (DVec2, bool) {
+        let c = self.run.config;
+        // The margin relaxes to the full tolerance as pushes near the target pile up: the
+        // shortest push moves the object about 10 mm, and an estimate off by a few mm can
+        // keep a strict margin out of reach.
+        let margin = (c.stop_margin + c.stop_margin_relax * f64::from(self.near_pushes)).min(1.0);
+        let tol = margin * c.tolerance_m;
+        match self.task {
+            Task::Place { goal } => {
+                let g = DVec2::new(goal.x, goal.y);
+                let near = (est.position() - g).length() <= tol;
+                let turned = symmetric_angle_error(est.pose.theta - goal.theta, self.order).abs()
+                    <= margin * c.tolerance_rad;
+                // The baseline cannot turn the object on purpose: it stops at the position.
+                let done = near && (turned || matches!(self.brain, Brain::Baseline { .. }));
+                (g, done)
+            }
+            Task::Trajectory { path } => {
+                let end = path[path.len() - 1];
+                let target = lookahead_point(path, est.position(), self.run.config.lookahead_m);
+                (target, (est.position() - end).length() <= tol)
+            }
+        }
+    }
+
+    fn done(&self, est: &Estimate) -> bool {
+        self.target(est).1
+    }
+
+    fn needs_estimate(&self, est: &Estimate) -> bool {
+        if self.planner.reads_ground_truth() {
+            return false;
+        }
+        let c = self.run.config;
+        if est.pushes_since >= c.max_pushes_between_estimates || !est.error_m.is_finite() {
+            return true;
+        }
+        let (target, _) = self.target(est);
+        let distance = (est.position() - target).length();
+        if est.error_m > c.tolerance_m.max(c.reestimate_fraction * distance) {
+            return true;
+        }
+        match (self.task, &self.brain) {
+            // Far from the goal the orientation hardly weighs in the push choice.
+            (Task::Place { goal }, Brain::Gradient { .. })
+                if distance < c.orientation_matters_within_m =>
+            {
+                let off = symmetric_angle_error(est.pose.theta - goal.theta, self.order).abs();
+                est.error_rad > c.tolerance_rad.max(c.reestimate_fraction * off)
+            }
+            _ => false,
+        }
+    }
+
+    /// planBestPush.
+    fn plan(&self, est: &Estimate) -> Option<PushOrder> {
+        let c = self.run.config;
+        let (target, _) = self.target(est);
+        match &self.brain {
+            Brain::Gradient {
+                planner,
+                long_planner,
+                start_radius,
+                ..
+            } => {
+                let planner = if self.push_longer {
+                    long_planner
+                } else {
+                    planner
+                };
+                if !self.push_longer
+                    && matches!(self.task, Task::Trajectory { .. })
+                    && c.steer_centroid_pushes
+                {
+                    // Wider and wider until some push qualifies; else the full search.
+                    let steered = [1.0, 2.0, 4.0]
+                        .into_iter()
+                        .find_map(|k| self.plan_steered(est, target, k * c.steer_max_deg));
+                    if steered.is_some() {
+                        return steered;
+                    }
+                }
+                let goal = match self.task {
+                    Task::Place { goal } => Goal::Place { pose: *goal },
+                    Task::Trajectory { .. } => Goal::Reach { target },
+                };
+                let plan = planner.plan(est.pose, &goal)?;
+                let k = planner.settings().fraction_offset;
+                Some(PushOrder {
+                    retry: self.push_longer,
+                    start: plan.start,
+                    duration: plan.fraction * c.push.push_duration,
+                    prediction: Some(plan.prediction),
+                    plan: Some((
+                        plan.contact_obj,
+                        plan.alpha_deg,
+                        (plan.fraction + k) / (1.0 + k),
+                    )),
+                    orbit: *start_radius,
+                })
+            }
+            Brain::Baseline { radius } => {
+                let centre = est.position();
+                let to = target - centre;
+                let dir = if to.length() > 1e-6 {
+                    to.normalize()
+                } else {
+                    DVec2::X
+                };
+                let r = radius.unwrap_or(0.06) + self.run.robot.body_radius + c.start_gap_m;
+                let s = centre - r * dir;
+                // The object moves about as far as the robot drives once they touch.
+                let duration = if self.push_longer {
+                    c.push.push_duration
+                } else {
+                    (to.length() / c.push.push_speed).clamp(0.1, c.push.push_duration)
+                };
+                Some(PushOrder {
+                    retry: self.push_longer,
+                    start: Pose2::new(s.x, s.y, dir.to_angle()),
+                    duration,
+                    prediction: None,
+                    plan: None,
+                    orbit: r,
+                })
+            }
+        }
+    }
+
+    /// Trajectory: a push through the centroid (alpha 0, the baseline's kind) whose
+    /// predicted motion heads for `target`: among the contacts whose push runs within
+    /// `steer_max_deg` of the target's direction, the one the AG predicts to move the
+    /// centroid most nearly at the target (the AG corrects the drift of a centroid push),
+    /// its length from the predicted displacement. `None` if no push runs within
+    /// `max_deg` of the target's direction.
+    fn plan_steered(&self, est: &Estimate, target: DVec2, max_deg: f64) -> Option<PushOrder> {
+        let Brain::Gradient {
+            planner,
+            start_radius,
+            ..
+        } = &self.brain
+        else {
+            return None;
+        };
+        let c = self.run.config;
+        let to = target - est.position();
+        let want = to.to_angle();
+        let rot = DVec2::from_angle(est.pose.theta);
+        let k = planner.settings().fraction_offset;
+        let mut best: Option<(f64, DVec2, f64, f64, Prediction)> = None;
+        for &contact in planner.contacts() {
+            let push_dir = rot.rotate(-contact).to_angle();
+            if agp_shared_types::angle::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
+                continue;
+            }
+            let Some(p) = planner.predictor().predict(contact, 0.0) else {
+                continue;
+            };
+            if p.confidence < planner.settings().min_confidence || p.displacement.length() < 1e-3 {
+                continue;
+            }
+            let moved = rot.rotate(p.displacement);
+            // The push length that brings the centroid to the target (within the learned
+            // push), by the offset model of PushChoiceSettings.
+            let scale = (to.length() / moved.length()).clamp(0.2, 1.0);
+            let f = (scale * (1.0 + k) - k).clamp(0.1, 1.0);
+            let s = (f + k) / (1.0 + k);
+            let off = agp_shared_types::angle::wrap_angle(moved.to_angle() - want).abs()
+                + c.reach_rotation_weight_m_per_rad / STEER_LEVER_M * p.rotation_rad.abs();
+            if best.is_none_or(|b| off < b.0) {
+                let scaled = Prediction {
+                    displacement: p.displacement * s,
+                    rotation_rad: p.rotation_rad * s,
+                    ..p
+                };
+                best = Some((off, contact, f, s, scaled));
+            }
+        }
+        let (_, contact, f, s_scale, prediction) = best?;
+        let (s, h) = crate::approach_start(contact, 0.0, *start_radius)?;
+        let sw = est.position() + rot.rotate(s);
+        Some(PushOrder {
+            retry: false,
+            start: Pose2::new(
+                sw.x,
+                sw.y,
+                agp_shared_types::angle::wrap_angle(h + est.pose.theta),
+            ),
+            duration: f * c.push.push_duration,
+            prediction: Some(prediction),
+            plan: Some((contact, 0.0, s_scale)),
+            orbit: *start_radius,
+        })
+    }
+
+    /// updateEstimate: the estimator's estimate once it carried its tracks on by the push
+    /// (the gradient's prediction of the announced push, corrected so that the object
+    /// touches the robot where it stopped; for the baseline, the centroid moved by the
+    /// robot's own travel while it pushed).
+    fn update(&self, est: Estimate, done: PushDone) -> Estimate {
+        let p = self.run.world.perceived();
+        let next = match &self.brain {
+            Brain::Gradient { .. } if p.valid == 1 => Estimate {
+                pose: p.pose,
+                error_m: p.sigma_xy,
+                error_rad: p.sigma_theta,
+                pushes_since: est.pushes_since + 1,
+            },
+            Brain::Gradient { .. } => Estimate {
+                error_m: f64::INFINITY,
+                pushes_since: est.pushes_since + 1,
+                ..est
+            },
+            Brain::Baseline { .. } => Estimate {
+                pose: Pose2::new(p.centroid[0], p.centroid[1], est.pose.theta),
+                error_m: if p.centroid_valid == 1 {
+                    p.centroid_sigma_m
+                } else {
+                    f64::INFINITY
+                },
+                error_rad: est.error_rad,
+                pushes_since: est.pushes_since + 1,
+            },
+        };
+        if !next.error_m.is_finite() {
+            self.trace(format_args!(
+                "surprised: front gap {:?} once the object came to rest",
+                done.front_gap
+            ));
+        }
+        next
+    }
+
+    /// EstimateOrientationObj: face the estimated centroid (if any), approach to the
+    /// circling's gap, circle once, and match the border to S (or, for the baseline, take
+    /// the centroid of the circled border). `None` if the circling found too little.
+    fn estimate(&mut self, guess: Option<Pose2>) -> Result<Option<Estimate>, WorldStepError> {
+        self.circlings += 1;
+        let gap = self.run.config.circle.gap + 0.002;
+        // Drive at most a little past the guessed centroid: a guess far off must not send
+        // the robot away.
+        let mut timeout = 5.0;
+        if let Some(g) = guess {
+            let centre = DVec2::new(g.x, g.y);
+            self.run.face(centre)?;
+            let d = (centre - self.run.pose().position()).length();
+            timeout = ((d + 0.05) / self.run.config.push.approach_speed).min(timeout);
+        }
+        if !self.run.approach_to_gap(gap, timeout)? {
+            self.trace(format_args!("approach saw nothing"));
+            return Ok(None);
+        }
+        let match_before = self.run.world.perceived().match_seq;
+        if !self.run.circle()? {
+            self.trace(format_args!("circling failed"));
+            return Ok(None);
+        }
+        // The estimator matched what it saw of the circling (a new `match_seq`) and took
+        // its centroid (error bound 0) on the frame after the circling's end.
+        let p = *self.run.world.perceived();
+        self.trace(format_args!(
+            "circled: match {} (rms {:.1} mm, {:.0} % inliers), border seen {:.0} %",
+            p.match_seq,
+            p.match_rms_m * 1e3,
+            p.match_inliers * 1e2,
+            p.border_seen * 1e2
+        ));
+        match &mut self.brain {
+            Brain::Gradient { .. } => {
+                if p.valid == 0 || p.match_seq == match_before {
+                    self.trace(format_args!("the estimator found no pose"));
+                    return Ok(None);
+                }
+                self.trace(format_args!(
+                    "estimate ({:.1}, {:.1}) mm {:.1} deg (guess {:?})",
+                    p.pose.x * 1e3,
+                    p.pose.y * 1e3,
+                    p.pose.theta.to_degrees(),
+                    guess.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
+                ));
+                Ok(Some(Estimate::fresh(p.pose)))
+            }
+            Brain::Baseline { radius } => {
+                if p.centroid_valid == 0 || p.centroid_sigma_m != 0.0 {
+                    return Ok(None);
+                }
+                radius.get_or_insert(p.object_radius_m);
+                let theta = guess.map_or(0.0, |g| g.theta);
+                Ok(Some(Estimate::fresh(Pose2::new(
+                    p.centroid[0],
+                    p.centroid[1],
+                    theta,
+                ))))
+            }
+        }
+    }
+}
+
+/// How a push that touched the object ended.
+#[derive(Debug, Clone, Copy)]
+struct PushDone {
+    /// The front gap the estimator perceives once the object has come to rest, m.
+    front_gap: Option<f64>,
+}
+
+/// The world as the robot drives it.
+struct Run<'a, W: World> {
+    world: &'a mut W,
+    robot: RobotDescription,
+    /// The IR sampling period, s.
+    ir_period_s: f64,
+    config: &'a EpisodeConfig,
+    /// One routine for every circling, restarted each time: its buffers are allocated once.
+    circling: CircleRoutine,
+    /// The waypoints of the travel under way, a buffer kept from one travel to the next.
+    waypoints: Vec<DVec2>,
+    samples: Vec<PoseSample>,
+    recording: bool,
+    /// Simulated time at the episode's start, s.
+    start_s: f64,
+    /// Running count of the events told to the estimator.
+    event_seq: u64,
+}
+
+impl<W: World> Run<'_, W> {
+    /// The robot's pose as the estimator knows it (odometry and the overhead fix).
+    fn pose(&mut self) -> Pose {
+        self.world.perceived().robot
+    }
+
+    /// Tells the estimator what the planner does, at the latest frame.
+    fn tell(&mut self, kind: LearnEventKind, flag: u32) -> Result<(), WorldStepError> {
+        self.event_seq += 1;
+        self.world.tell(LearnEvent {
+            seq: self.event_seq,
+            kind: kind as u32,
+            flag,
+            step: self.world.step_count(),
+            ..LearnEvent::default()
+        })
+    }
+
+    /// Simulated time since the episode began, s.
+    fn elapsed(&self) -> f64 {
+        self.world.sim_time() - self.start_s
+    }
+
+    /// Records the object's true pose, where the world offers it (evaluation only).
+    fn record(&mut self) {
+        if let Some(p) = self.world.object_truth() {
+            self.samples.push(PoseSample {
+                t_s: self.world.sim_time(),
+                pose: p,
+            });
+        }
+    }
+
+    fn step(&mut self, left: f64, right: f64) -> Result<(), WorldStepError> {
+        self.world.step(left, right)?;
+        if self.recording
+            && self
+                .world
+                .step_count()
+                .is_multiple_of(self.config.record_every_steps.max(1))
+        {
+            self.record();
+        }
+        Ok(())
+    }
+
+    /// Turns in place to face `point`.
+    fn face(&mut self, point: DVec2) -> Result<bool, WorldStepError> {
+        let pose = self.pose();
+        let heading = (point - pose.position()).to_angle();
+        let mut travel = TravelRoutine::new(
+            self.config.travel,
+            self.robot.axle_length,
+            self.robot.max_wheel_speed,
+            Vec::new(),
+            heading,
+        );
+        self.drive_travel(&mut travel, 10.0)
+    }
+
+    /// Drives forward until the front gap is at most `gap` (m), or stops shrinking while
+    /// the object is in sight (a corner met head-on slips between the front rays: the
+    /// robot would push it), or `timeout` s pass.
+    fn approach_to_gap(&mut self, gap: f64, timeout: f64) -> Result<bool, WorldStepError> {
+        let t0 = self.world.sim_time();
+        let speed = self.config.push.approach_speed;
+        // The front gap at each of the last IR samples, newest first.
+        let mut gaps = [None; 6];
+        let mut last_sample = None;
+        while self.world.sim_time() - t0 < timeout {
+            let s = self.world.senses();
+            let now = self.world.perceived().front_gap();
+            if now.is_some_and(|g| g <= gap) {
+                return Ok(true);
+            }
+            if last_sample != Some(s.ir_sample) {
+                last_sample = Some(s.ir_sample);
+                gaps.rotate_right(1);
+                gaps[0] = now;
+                if let (Some(a), Some(b)) = (gaps[0], gaps[5]) {
+                    // A free approach closes 5 samples' travel (6 mm at 80 mm/s).
+                    let expected = speed * 5.0 / self.robot.ir_rate_hz;
+                    if b - a < 0.25 * expected {
+                        return Ok(true);
+                    }
+                }
+            }
+            self.step(speed, speed)?;
+        }
+        Ok(false)
+    }
+
+    /// One circling; whether the lap closed or gave enough border points (robot's frame,
+    /// `self.circling.border_points()`).
+    fn circle(&mut self) -> Result<bool, WorldStepError> {
+        self.circling.restart(self.world.sim_time());
+        self.tell(LearnEventKind::TaskCircleBegin, 0)?;
+        loop {
+            let pose = self.pose();
+            let s = self.world.senses();
+            let (l, r) = self
+                .circling
+                .update(self.world.sim_time(), s.ir_sample, pose, &s.ir_raw);
+            if let CirclePhase::Done { outcome, .. } = self.circling.phase() {
+                let enough =
+                    self.circling.border_points().len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
+                let usable = outcome == CircleOutcome::Closed
+                    || (outcome == CircleOutcome::Timeout && enough);
+                self.tell(LearnEventKind::TaskCircleEnd, u32::from(usable))?;
+                // One frame for the estimator to match what it saw.
+                self.step(0.0, 0.0)?;
+                return Ok(usable);
+            }
+            self.step(l, r)?;
+        }
+    }
+
+    /// Backs off after a push.
+    fn backoff(&mut self) -> Result<(), WorldStepError> {
+        let t0 = self.world.sim_time();
+        let v = -self.config.backoff_speed;
+        while self.world.sim_time() - t0 < self.config.backoff_s {
+            self.step(v, v)?;
+        }
+        Ok(())
+    }
+
+    /// Out to the circle of radius `orbit` round `centre`, along it, and into `start`.
+    fn travel(&mut self, centre: DVec2, orbit: f64, start: Pose2) -> Result<bool, WorldStepError> {
+        let pose = self.pose();
+        let target = DVec2::new(start.x, start.y);
+        let mut way = std::mem::take(&mut self.waypoints);
+        orbit_waypoints_into(
+            &mut way,
+            pose.position(),
+            centre,
+            orbit,
+            target,
+            self.config.travel.arc_step,
+        );
+        let mut travel = TravelRoutine::new(
+            self.config.travel,
+            self.robot.axle_length,
+            self.robot.max_wheel_speed,
+            way,
+            start.theta,
+        );
+        let arrived = self.drive_travel(&mut travel, 30.0);
+        self.waypoints = travel.into_waypoints();
+        arrived
+    }
+
+    fn drive_travel(
+        &mut self,
+        travel: &mut TravelRoutine,
+        timeout: f64,
+    ) -> Result<bool, WorldStepError> {
+        let t0 = self.world.sim_time();
+        while self.world.sim_time() - t0 < timeout {
+            let pose = self.pose();
+            let (l, r) = travel.update(pose);
+            if travel.phase() == TravelPhase::Done {
+                return Ok(true);
+            }
+            self.step(l, r)?;
+        }
+        Ok(false)
+    }
+
+    /// Approach until the IR says contact, then push for `duration` s; `None` if the
+    /// approach saw nothing close.
+    fn push(
+        &mut self,
+        duration: f64,
+        reach: f64,
+        stall_contact: bool,
+        plan: Option<(DVec2, f64, f64)>,
+    ) -> Result<Option<PushDone>, WorldStepError> {
+        // A push that misses must not drive far past the object.
+        let settings = PushSettings {
+            push_duration: duration,
+            stall_contact,
+            approach_timeout: self
+                .config
+                .push
+                .approach_timeout
+                .min(reach / self.config.push.approach_speed),
+            ..self.config.push
+        };
+        let mut routine = PushRoutine::new(settings, self.world.sim_time());
+        let mut contact = None;
+        loop {
+            let pose = self.pose();
+            let s = self.world.senses();
+            let gap = self.world.perceived().front_gap();
+            let (l, r) = routine.update(gap, self.ir_period_s, self.world.sim_time(), s.ir_sample);
+            match routine.phase() {
+                PushPhase::Push { .. } => {
+                    if contact.is_none() {
+                        contact = Some(pose);
+                        self.recording = true;
+                        self.world.tell(LearnEvent {
+                            seq: {
+                                self.event_seq += 1;
+                                self.event_seq
+                            },
+                            kind: LearnEventKind::TaskPushBegin as u32,
+                            flag: u32::from(plan.is_some()),
+                            step: self.world.step_count(),
+                            contact: plan.map_or([0.0; 2], |p| p.0.to_array()),
+                            alpha_deg: plan.map_or(0.0, |p| p.1),
+                            scale: plan.map_or(1.0, |p| p.2),
+                            ..LearnEvent::default()
+                        })?;
+                    }
+                }
+                PushPhase::Done { contact: touched } => {
+                    self.recording = false;
+                    // Let the object come to rest before anything is read off it.
+                    let t0 = self.world.sim_time();
+                    while self.world.sim_time() - t0 < 0.2 {
+                        self.step(0.0, 0.0)?;
+                    }
+                    let front_gap = self.world.perceived().front_gap();
+                    if contact.is_some() {
+                        self.tell(LearnEventKind::TaskPushEnd, 0)?;
+                    }
+                    return Ok((touched && contact.is_some()).then_some(PushDone { front_gap }));
+                }
+                PushPhase::Approach { .. } => {}
+            }
+            self.step(l, r)?;
+        }
+    }
+}
+
+/// The point `ahead` (m) along `path` past the projection of `p` on it (the end if
+/// beyond).
+pub fn lookahead_point(path: &[DVec2], p: DVec2, ahead: f64) -> DVec2 {
+    let Some(&last) = path.last() else {
+        return p;
+    };
+    // The projection: arc length of the closest point.
+    let (mut best_d, mut best_s, mut s0) = (f64::INFINITY, 0.0, 0.0);
+    for w in path.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let ab = b - a;
+        let len = ab.length();
+        let t = if len > 1e-12 {
+            ((p - a).dot(ab) / (len * len)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + t * ab - p).length();
+        if d < best_d {
+            best_d = d;
+            best_s = s0 + t * len;
+        }
+        s0 += len;
+    }
+    let mut s = best_s + ahead;
+    for w in path.windows(2) {
+        let len = (w[1] - w[0]).length();
+        if s <= len && len > 1e-12 {
+            return w[0] + (w[1] - w[0]) * (s / len);
+        }
+        s -= len;
+    }
+    last
+}
+
+/// Distance from `p` to the closest point of the polyline `path`, m.
+pub fn distance_to_path(path: &[DVec2], p: DVec2) -> f64 {
+    match path {
+        [] => f64::INFINITY,
+        [a] => (p - *a).length(),
+        _ => path
+            .windows(2)
+            .map(|w| agp_world::point_segment_distance(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lookahead_point_runs_along_the_path_and_stops_at_its_end() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.3)];
+        let p = lookahead_point(&path, DVec2::new(0.1, 0.02), 0.05);
+        assert!((p - DVec2::new(0.15, 0.0)).length() < 1e-12, "{p}");
+        // Round the corner: 0.28 + 0.05 is 0.03 up the second segment.
+        let p = lookahead_point(&path, DVec2::new(0.28, -0.01), 0.05);
+        assert!((p - DVec2::new(0.3, 0.03)).length() < 1e-12, "{p}");
+        let p = lookahead_point(&path, DVec2::new(0.31, 0.29), 0.05);
+        assert_eq!(p, DVec2::new(0.3, 0.3));
+    }
+
+    #[test]
+    fn the_distance_to_a_path_is_to_its_closest_segment() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.3)];
+        assert!((distance_to_path(&path, DVec2::new(0.1, 0.02)) - 0.02).abs() < 1e-12);
+        assert!((distance_to_path(&path, DVec2::new(0.32, 0.1)) - 0.02).abs() < 1e-12);
+        assert!((distance_to_path(&path, DVec2::new(-0.03, -0.04)) - 0.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn planner_names_parse_back() {
+        for k in PlannerKind::ALL {
+            assert_eq!(k.name().parse::<PlannerKind>(), Ok(k));
+        }
+        assert!("magic".parse::<PlannerKind>().is_err());
+    }
+}

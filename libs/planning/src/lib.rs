@@ -1,0 +1,21 @@
+//! The planner's logic, free of shared memory: contact inference from IR, the push, circling and travel routines, the push choice, and episodes of the benchmark tasks (Algorithm 5) against any [`World`]: the physics process over iceoryx2 or, with feature `sim`, the physics library in-process.
+
+mod circle_routine;
+mod episode;
+mod push_choice;
+mod push_routine;
+mod travel;
+mod world;
+
+pub use agp_affordance::approach_start;
+pub use circle_routine::{CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, Side};
+pub use episode::{
+    EpisodeConfig, EpisodeEnd, EpisodeResult, EpisodeRunError, Evaluation, PlannerKind,
+    PlannerParseError, PoseSample, Task, distance_to_path, drive_episode, lookahead_point,
+};
+pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
+pub use push_routine::{PushPhase, PushRoutine, PushSettings};
+pub use travel::{
+    TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, orbit_waypoints_into,
+};
+pub use world::{Senses, World, WorldStepError};

@@ -1,0 +1,1046 @@
+//! The fault campaign: real pipelines under `agp up` (release binaries), faults injected at
+//! random moments, and what survived.
+//!
+//! Runs cycle through three phases: the learning phase (lockstep, a few trials per alpha,
+//! its verdict the saved AG file), the placement task (lockstep, the estimator serving an
+//! AG file learned once by `agp bench learn` at the start, its verdict the judge's) and a
+//! long-running session on the realtime clock (physics and the estimator reading every
+//! frame until `agp down`: it stands in for a live session until live sessions exist; it
+//! has no planner, since every planner mode refuses the realtime clock). Into each run go
+//! several faults, drawn from a shuffled deck (seeded): `kill -9` of each child, SIGSTOP
+//! then SIGCONT after a random pause of each child and of the supervisor, and `kill -9` of
+//! the supervisor followed by a fresh `agp up` of the same instance, which must clean what
+//! the dead one left and run again.
+//!
+//! A fault is survived when the pipeline is back: the child killed is running again with a
+//! higher restart count, the process stopped is running again, the new supervisor answers
+//! with every child running, and (lockstep) physics's step log advances again; or the run
+//! reached its end with status 0 meanwhile. Its recovery time runs from the kill (or the
+//! SIGCONT) to that moment. A fault not survived ends its run's faults.
+//!
+//! ```text
+//! cargo build --release --workspace --bins
+//! target/release/bench-faults --faults 500 --seed 1 --json faults.json
+//! ```
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use agp_affordance::AffordanceGradient;
+use agp_harness::pipeline::{
+    Bins, LaunchSpec, Phase, Session, Status, StepCounter, instance_files, is_interrupt,
+    last_line_with, reap_children, signal, sleep_checked, step_log_path,
+};
+use agp_runtime::install_shutdown_handler;
+use agp_world::Rng;
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Parser;
+use serde_json::{Value, json};
+
+/// Injects faults into real pipelines at random moments and reports what survived.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Args {
+    /// Folder of the release binaries (`agp`, `agp-physics`, `agp-estimator`,
+    /// `agp-planner`) [default: the folder of this executable].
+    #[arg(long, value_name = "DIR")]
+    bin_dir: Option<PathBuf>,
+    /// Faults to inject in all.
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..))]
+    faults: u32,
+    /// Seed of the random moments, pauses and the order of the faults.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Most faults injected into one run (a run that ends first gets fewer).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..))]
+    faults_per_run: u32,
+    /// Trials per alpha of the learning runs (the paper's 60 would take minutes per run).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..))]
+    trials_per_alpha: u32,
+    /// A fault whose pipeline is not back within this many seconds is not survived.
+    #[arg(long, default_value_t = 45.0)]
+    recovery_timeout_s: f64,
+    /// A learning or placement run that has not ended this long after its last fault
+    /// is stopped and counted lost.
+    #[arg(long, default_value_t = 240.0)]
+    run_timeout_s: f64,
+    /// Also write the figures and every fault as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+/// The most restarts a launch file may give a child (`agp`'s own limit is 1000).
+const MAX_RESTARTS: u32 = 1000;
+
+/// Faults in a row that find nothing to hit (the supervisor not answering, the target not
+/// running) before the run is given up as lost.
+const MAX_SKIPS: u32 = 40;
+
+/// Which process a fault hits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Target {
+    Physics,
+    Estimator,
+    Planner,
+    Supervisor,
+}
+
+impl Target {
+    fn child_name(self) -> Option<&'static str> {
+        match self {
+            Target::Physics => Some("physics"),
+            Target::Estimator => Some("estimator"),
+            Target::Planner => Some("planner"),
+            Target::Supervisor => None,
+        }
+    }
+
+    fn as_str(self) -> &'static str {
+        self.child_name().unwrap_or("supervisor")
+    }
+}
+
+/// What a fault does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Action {
+    /// `kill -9`; for the supervisor, followed by a fresh `agp up` of the instance.
+    Kill,
+    /// SIGSTOP, a random pause, SIGCONT.
+    Stop,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct FaultKind {
+    action: Action,
+    target: Target,
+}
+
+impl FaultKind {
+    const ALL: [FaultKind; 8] = [
+        FaultKind::new(Action::Kill, Target::Physics),
+        FaultKind::new(Action::Kill, Target::Estimator),
+        FaultKind::new(Action::Kill, Target::Planner),
+        FaultKind::new(Action::Stop, Target::Physics),
+        FaultKind::new(Action::Stop, Target::Estimator),
+        FaultKind::new(Action::Stop, Target::Planner),
+        FaultKind::new(Action::Stop, Target::Supervisor),
+        FaultKind::new(Action::Kill, Target::Supervisor),
+    ];
+
+    const fn new(action: Action, target: Target) -> Self {
+        Self { action, target }
+    }
+
+    fn label(self) -> String {
+        match (self.action, self.target) {
+            (Action::Kill, Target::Supervisor) => "kill -9 supervisor, up again".to_owned(),
+            (Action::Kill, t) => format!("kill -9 {}", t.as_str()),
+            (Action::Stop, t) => format!("stop/cont {}", t.as_str()),
+        }
+    }
+
+    /// Whether runs of `phase` have the process this fault hits.
+    fn applies_to(self, phase: Phase) -> bool {
+        self.target
+            .child_name()
+            .is_none_or(|c| phase.children().contains(&c))
+    }
+}
+
+/// The faults of a phase, drawn in a shuffled order, reshuffled when all were drawn, so
+/// every kind is injected about as often.
+struct Deck {
+    kinds: Vec<FaultKind>,
+    next: usize,
+}
+
+impl Deck {
+    fn new(phase: Phase) -> Self {
+        Self {
+            kinds: FaultKind::ALL
+                .into_iter()
+                .filter(|k| k.applies_to(phase))
+                .collect(),
+            next: usize::MAX,
+        }
+    }
+
+    fn draw(&mut self, rng: &mut Rng) -> FaultKind {
+        if self.next >= self.kinds.len() {
+            for i in (1..self.kinds.len()).rev() {
+                let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+                self.kinds.swap(i, j);
+            }
+            self.next = 0;
+        }
+        self.next += 1;
+        self.kinds[self.next - 1]
+    }
+}
+
+/// One injected fault and what came of it.
+#[derive(Debug, Clone)]
+struct FaultRecord {
+    run: usize,
+    phase: Phase,
+    kind: FaultKind,
+    /// Seconds into the run when it was injected.
+    at_s: f64,
+    /// SIGSTOP to SIGCONT, ms.
+    pause_ms: Option<f64>,
+    survived: bool,
+    /// Fault (kill, or SIGCONT) to the pipeline back, ms.
+    recovery_ms: Option<f64>,
+    note: String,
+}
+
+/// One run and its verdict.
+#[derive(Debug, Clone)]
+struct RunRecord {
+    index: usize,
+    phase: Phase,
+    instance: String,
+    faults: u32,
+    /// `agp up` started for it (more than one when its supervisor was killed).
+    ups: u32,
+    /// The run's last supervisor exited with status 0 at the run's end.
+    completed: bool,
+    /// The verdict: the AG file (learn), the judge's (place); `None` for live runs.
+    correct: Option<bool>,
+    exit: Option<i32>,
+    /// Files of the instance left once its last supervisor and every child were gone.
+    files_left: usize,
+    wall_s: f64,
+    note: String,
+}
+
+/// How a wait for the pipeline to be back ended.
+enum Back {
+    /// After this long since the fault.
+    In(Duration),
+    /// The run's supervisor exited meanwhile, with this status code.
+    Ended(Option<i32>),
+    /// Not within the recovery timeout; what was still missing.
+    Never(String),
+}
+
+/// One run under way: its session (supervisor, folder, pids seen: stopped with nothing
+/// left on every way out) and physics's step log.
+struct Run<'a> {
+    session: Session<'a>,
+    phase: Phase,
+    ups: u32,
+    steps: StepCounter,
+    started: Instant,
+}
+
+impl<'a> Run<'a> {
+    fn start(bins: &'a Bins, phase: Phase, instance: &str, launch: PathBuf) -> Result<Self> {
+        let session = Session::start(bins, instance, launch)?;
+        Ok(Self {
+            steps: StepCounter::new(step_log_path(&session.dir)),
+            session,
+            phase,
+            ups: 1,
+            started: Instant::now(),
+        })
+    }
+
+    fn ended(&mut self) -> Option<Option<i32>> {
+        self.session.ended()
+    }
+
+    fn physics_publishes(&self, s: &Status) -> bool {
+        self.phase.has_step_log()
+            || s.child("physics")
+                .and_then(|p| p.rate_per_s)
+                .is_some_and(|r| r > 0.0)
+    }
+
+    /// Whether the status shows every child running, physics publishing (realtime).
+    fn all_back(&self, s: &Status) -> bool {
+        s.all_running(self.phase.children()) && self.physics_publishes(s)
+    }
+
+    /// Waits until `back` holds in a status and then (lockstep) physics's step log grows;
+    /// the time is taken from `since`.
+    fn wait_back(
+        &mut self,
+        since: Instant,
+        timeout: Duration,
+        what: &str,
+        back: impl Fn(&Self, &Status) -> bool,
+    ) -> Result<Back> {
+        let deadline = since + timeout;
+        let mut steps_at_back = None;
+        loop {
+            sleep_checked(Duration::ZERO)?;
+            if let Some(code) = self.ended() {
+                return Ok(Back::Ended(code));
+            }
+            if Instant::now() >= deadline {
+                let missing = if steps_at_back.is_some() {
+                    format!("{what} back but no physics step within {timeout:?}")
+                } else {
+                    format!("{what} not back within {timeout:?}")
+                };
+                return Ok(Back::Never(missing));
+            }
+            match steps_at_back {
+                None => {
+                    if let Some(s) = self.session.status()?
+                        && back(self, &s)
+                    {
+                        if !self.phase.has_step_log() {
+                            return Ok(Back::In(since.elapsed()));
+                        }
+                        steps_at_back = Some(self.steps.count());
+                    }
+                }
+                Some(at) => {
+                    if self.steps.count() > at {
+                        return Ok(Back::In(since.elapsed()));
+                    }
+                }
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Waits until every child runs (the run has started).
+    fn wait_all_running(&mut self, timeout: Duration) -> Result<Back> {
+        let since = Instant::now();
+        self.wait_back(since, timeout, "every child", |r, s| r.all_back(s))
+    }
+
+    /// A current status, if the supervisor answers within a few tries.
+    fn fresh_status(&mut self) -> Result<Option<Status>> {
+        for _ in 0..50 {
+            if self.ended().is_some() {
+                return Ok(None);
+            }
+            if let Some(s) = self.session.status()? {
+                return Ok(Some(s));
+            }
+            sleep_checked(Duration::from_millis(50))?;
+        }
+        Ok(None)
+    }
+}
+
+struct Campaign {
+    args: Args,
+    bins: Bins,
+    rng: Rng,
+    work: tempfile::TempDir,
+    ag_file: PathBuf,
+    decks: BTreeMap<Phase, Deck>,
+    faults: Vec<FaultRecord>,
+    runs: Vec<RunRecord>,
+    started: Instant,
+}
+
+impl Campaign {
+    fn injected(&self) -> u32 {
+        self.faults.len() as u32
+    }
+
+    /// The progress line: rewritten in place on a terminal; otherwise a line at each run's
+    /// start.
+    fn progress(&self, run: usize, phase: Phase, what: &str) {
+        let survived = self.faults.iter().filter(|f| f.survived).count();
+        let line = format!(
+            "[{}/{}] {:.0} s, run {run} ({}): {what}; {survived} survived",
+            self.injected(),
+            self.args.faults,
+            self.started.elapsed().as_secs_f64(),
+            phase.as_str()
+        );
+        if std::io::stderr().is_terminal() {
+            eprint!("\r\x1b[2K{line}");
+        } else if what == "starting" {
+            eprintln!("{line}");
+        }
+    }
+
+    /// One run of `phase` with at most `budget` faults.
+    fn run(&mut self, index: usize, phase: Phase, budget: u32) -> Result<()> {
+        let instance = format!("bf{}-{index:04}", std::process::id() % 100_000);
+        if !instance_files(&instance)?.is_empty() {
+            bail!("instance `{instance}` already has files; remove them or run again");
+        }
+        let dir = self.work.path().join(format!("run-{index:04}"));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        let spec = LaunchSpec {
+            phase,
+            instance: &instance,
+            trials_per_alpha: self.args.trials_per_alpha,
+            ag_file: Some(&self.ag_file),
+            max_restarts: self.args.faults_per_run.saturating_mul(4).min(MAX_RESTARTS),
+        };
+        let launch = spec.write(&self.bins, &dir)?;
+        let bins = self.bins.clone();
+        let mut run = Run::start(&bins, phase, &instance, launch)?;
+        let recovery = Duration::from_secs_f64(self.args.recovery_timeout_s);
+        let mut record = RunRecord {
+            index,
+            phase,
+            instance,
+            faults: 0,
+            ups: 1,
+            completed: false,
+            correct: None,
+            exit: None,
+            files_left: 0,
+            wall_s: 0.0,
+            note: String::new(),
+        };
+        self.progress(index, phase, "starting");
+        let mut lost = match run.wait_all_running(Duration::from_secs(60))? {
+            Back::In(_) => None,
+            Back::Ended(Some(0)) => None,
+            Back::Ended(code) => Some(format!(
+                "the run ended before every child ran (status {code:?}){}",
+                last_error(&dir)
+            )),
+            Back::Never(what) => Some(format!("never started: {what}")),
+        };
+        let mut skips = 0;
+        while lost.is_none() && record.faults < budget && run.ended().is_none() {
+            let gap = self.rng.range(0.1, 1.0);
+            sleep_checked(Duration::from_secs_f64(gap))?;
+            if run.ended().is_some() {
+                break;
+            }
+            let kind = self
+                .decks
+                .get_mut(&phase)
+                .expect("a deck per phase")
+                .draw(&mut self.rng);
+            self.progress(index, phase, &kind.label());
+            let Some(fault) = self.inject(&mut run, index, kind, recovery)? else {
+                skips += 1;
+                if skips >= MAX_SKIPS {
+                    lost = Some(format!(
+                        "{skips} faults in a row found nothing to hit: the supervisor did not answer `agp status` or a child stayed down ({})",
+                        run.session.status()?.map_or("no status".to_owned(), |s| s
+                            .processes
+                            .iter()
+                            .map(|p| format!("{} {} restarts {}", p.name, p.state, p.restarts))
+                            .collect::<Vec<_>>()
+                            .join(", "))
+                    ));
+                }
+                continue;
+            };
+            skips = 0;
+            record.faults += 1;
+            if !fault.survived {
+                lost = Some(format!("{}: {}", kind.label(), fault.note));
+            }
+            self.faults.push(fault);
+        }
+        // The run's end: learning and placement end by themselves; the live session is
+        // brought down as a user would.
+        if lost.is_none() {
+            self.progress(index, phase, "to the run's end");
+            if phase == Phase::Live && run.ended().is_none() && !run.session.down()? {
+                record.note = "`agp down` failed".to_owned();
+            }
+            let timeout = Duration::from_secs_f64(self.args.run_timeout_s);
+            let end = Instant::now() + timeout;
+            while run.ended().is_none() && Instant::now() < end {
+                sleep_checked(Duration::from_millis(20))?;
+            }
+            if run.ended().is_none() {
+                lost = Some(format!("not ended {timeout:?} after its last fault"));
+            }
+        }
+        record.ups = run.ups;
+        record.exit = run.ended().flatten();
+        record.completed = lost.is_none() && record.exit == Some(0);
+        if !record.completed && lost.is_none() {
+            lost = Some(format!(
+                "ended with status {:?}{}",
+                record.exit,
+                last_error(&dir)
+            ));
+        }
+        // Every process gone, then count what the instance left.
+        record.files_left = run.session.shut();
+        record.wall_s = run.started.elapsed().as_secs_f64();
+        record.correct = match phase {
+            Phase::Learn => Some(check_learned(
+                &dir,
+                self.args.trials_per_alpha,
+                &mut record.note,
+            )),
+            Phase::Place => Some(check_placed(&dir, &record.instance, &mut record.note)),
+            Phase::Live => None,
+        };
+        if let Some(why) = lost {
+            if !record.note.is_empty() {
+                record.note.insert_str(0, "; ");
+            }
+            record.note.insert_str(0, &why);
+        }
+        self.runs.push(record);
+        Ok(())
+    }
+
+    /// Injects `kind` into `run`; `None` when its target is not running just now (the fault
+    /// is not counted and another is drawn).
+    fn inject(
+        &mut self,
+        run: &mut Run<'_>,
+        index: usize,
+        kind: FaultKind,
+        timeout: Duration,
+    ) -> Result<Option<FaultRecord>> {
+        let Some(before) = run.fresh_status()? else {
+            return Ok(None);
+        };
+        let at_s = run.started.elapsed().as_secs_f64();
+        let mut record = FaultRecord {
+            run: index,
+            phase: run.phase,
+            kind,
+            at_s,
+            pause_ms: None,
+            survived: false,
+            recovery_ms: None,
+            note: String::new(),
+        };
+        let back = match (kind.action, kind.target.child_name()) {
+            (action, Some(name)) => {
+                let Some(child) = before.child(name).filter(|c| c.running()).cloned() else {
+                    return Ok(None);
+                };
+                let pid = child.pid.expect("a running child has a pid");
+                if !self.bins.owns(pid) {
+                    return Ok(None);
+                }
+                match action {
+                    Action::Kill => {
+                        let t0 = Instant::now();
+                        signal(pid, libc::SIGKILL);
+                        run.wait_back(t0, timeout, name, |r, s| {
+                            s.child(name).is_some_and(|c| {
+                                c.running() && (c.restarts > child.restarts || c.pid != Some(pid))
+                            }) && r.physics_publishes(s)
+                        })?
+                    }
+                    Action::Stop => {
+                        let t0 = self.pause(run, pid, &mut record)?;
+                        run.wait_back(t0, timeout, name, |r, s| {
+                            s.child(name).is_some_and(|c| c.running()) && r.physics_publishes(s)
+                        })?
+                    }
+                }
+            }
+            (Action::Stop, None) => {
+                let pid = run.session.sup().pid();
+                let t0 = self.pause(run, pid, &mut record)?;
+                run.wait_back(t0, timeout, "the supervisor", |r, s| r.all_back(s))?
+            }
+            (Action::Kill, None) => {
+                let t0 = Instant::now();
+                let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
+                run.session.sup().signal(libc::SIGKILL);
+                run.session.sup().wait_exit(Duration::from_secs(10));
+                // Each child dies with its supervisor (PR_SET_PDEATHSIG).
+                let outlived = reap_children(&self.bins, &children, Duration::from_secs(10));
+                if outlived > 0 {
+                    record.note = format!(
+                        "{outlived} child(ren) outlived the killed supervisor (killed by the tool); "
+                    );
+                }
+                let left = instance_files(&run.session.instance)?.len();
+                record.note += &format!("{left} file(s) left by the dead supervisor; ");
+                run.session.up_again()?;
+                run.ups += 1;
+                run.wait_back(t0, timeout, "a new supervisor with every child", |r, s| {
+                    r.all_back(s)
+                })?
+            }
+        };
+        match back {
+            Back::In(d) => {
+                record.survived = !record.note.contains("outlived");
+                record.recovery_ms = Some(d.as_secs_f64() * 1e3);
+            }
+            Back::Ended(Some(0)) => {
+                record.survived = !record.note.contains("outlived");
+                record.note += "the run reached its end meanwhile, status 0";
+            }
+            Back::Ended(code) => {
+                record.note += &format!(
+                    "the run ended with status {}{}",
+                    code.map_or("(a signal)".to_owned(), |c| c.to_string()),
+                    last_error(&run.session.dir)
+                );
+            }
+            Back::Never(what) => record.note += &what,
+        }
+        Ok(Some(record))
+    }
+
+    /// SIGSTOP to `pid`, a random pause, SIGCONT; returns the moment of SIGCONT.
+    fn pause(&mut self, run: &mut Run<'_>, pid: u32, record: &mut FaultRecord) -> Result<Instant> {
+        let pause = Duration::from_secs_f64(self.rng.range(0.1, 2.0));
+        run.session.stopped = Some(pid);
+        signal(pid, libc::SIGSTOP);
+        let slept = sleep_checked(pause);
+        signal(pid, libc::SIGCONT);
+        run.session.stopped = None;
+        slept?;
+        record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+        Ok(Instant::now())
+    }
+}
+
+/// ": <the supervisor's last error line>" for notes, or nothing.
+fn last_error(dir: &Path) -> String {
+    last_line_with(dir, "up.err", "error")
+        .map(|l| format!(": {l}"))
+        .unwrap_or_default()
+}
+
+/// The learning run's verdict: an AG file of the triangle with the three alphas, each
+/// holding between 1 and `trials` pushes, and the estimator's report counting
+/// `3 x trials` trials.
+fn check_learned(dir: &Path, trials: u32, note: &mut String) -> bool {
+    let path = dir.join("results").join("triangle.ag");
+    let g = match AffordanceGradient::load(&path) {
+        Ok(g) => g,
+        Err(e) => {
+            *note = format!("no AG file: {e}");
+            return false;
+        }
+    };
+    if g.object_name() != "triangle" {
+        *note = format!("the AG file names `{}`", g.object_name());
+        return false;
+    }
+    let alphas: Vec<f64> = g.alphas_deg().collect();
+    if alphas.len() != 3 {
+        *note = format!("{} alphas in the AG file", alphas.len());
+        return false;
+    }
+    for a in alphas {
+        let pushes = g.push_count(a).unwrap_or(0);
+        if !(1..=u64::from(trials)).contains(&pushes) {
+            *note = format!("alpha {a:+.0} deg: {pushes} pushes of {trials} trials");
+            return false;
+        }
+    }
+    let line = last_line_with(dir, "up.log", "agp-estimator: learned");
+    let of = line.as_deref().and_then(|l| {
+        l.split_once("rejected of ")
+            .and_then(|(_, rest)| rest.split(|c: char| !c.is_ascii_digit()).next())
+            .and_then(|n| n.parse::<u32>().ok())
+    });
+    if of != Some(3 * trials) {
+        *note = format!(
+            "the estimator counted {} trials, not {}",
+            of.map_or("no".to_owned(), |n| n.to_string()),
+            3 * trials
+        );
+        return false;
+    }
+    true
+}
+
+/// The placement's verdict: the judge's JSON says placed.
+fn check_placed(dir: &Path, instance: &str, note: &mut String) -> bool {
+    let path = dir.join("results").join(format!("{instance}-place.json"));
+    let verdict: Option<Value> = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    match verdict {
+        None => {
+            *note = "no verdict from the judge".to_owned();
+            false
+        }
+        Some(v) if v["success"] == true => true,
+        Some(v) => {
+            *note = format!(
+                "NOT placed: {:.1} mm, {:.1} deg",
+                v["position_error_mm"].as_f64().unwrap_or(f64::NAN),
+                v["orientation_error_deg"].as_f64().unwrap_or(f64::NAN)
+            );
+            false
+        }
+    }
+}
+
+/// The AG file the placement runs serve: `agp bench learn` on the triangle (the paper's
+/// protocol, in-process, no shared memory), once.
+fn learn_ag(bins: &Bins, out: &Path) -> Result<PathBuf> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let out_str = out
+        .to_str()
+        .ok_or_else(|| anyhow!("{} is not UTF-8", out.display()))?;
+    let mut child = bins
+        .agp(out)
+        .args(["bench", "learn", "--scenario", "triangle", "--out", out_str])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("cannot start `agp bench learn`")?;
+    let exit = loop {
+        if let Some(s) = child.try_wait().context("cannot watch `agp bench learn`")? {
+            break s;
+        }
+        if let Err(e) = sleep_checked(Duration::from_millis(50)) {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(e);
+        }
+    };
+    let path = out.join("triangle.ag");
+    if !exit.success() || !path.is_file() {
+        let mut err = String::new();
+        if let Some(mut e) = child.stderr.take() {
+            use std::io::Read;
+            let _ = e.read_to_string(&mut err);
+        }
+        bail!(
+            "`agp bench learn --scenario triangle` failed ({exit}): {}",
+            err.lines().last().unwrap_or("no message")
+        );
+    }
+    Ok(path)
+}
+
+fn main() {
+    let args = Args::parse();
+    install_shutdown_handler();
+    match campaign(args) {
+        Ok(None) => {}
+        Ok(Some(missed)) => {
+            eprintln!("bench-faults: targets missed: {missed}");
+            std::process::exit(2);
+        }
+        Err(e) if is_interrupt(&e) => {
+            eprintln!("bench-faults: interrupted; every process stopped, no file left");
+            std::process::exit(130);
+        }
+        Err(e) => {
+            eprintln!("bench-faults: error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}
+
+/// Runs the campaign and prints its figures; `Some(what)` when a target was missed (a
+/// fault not survived, a run lost or wrong, a file left).
+fn campaign(args: Args) -> Result<Option<String>> {
+    let bins = Bins::new(args.bin_dir.clone())?;
+    let work = tempfile::Builder::new()
+        .prefix("bench-faults-")
+        .tempdir()
+        .context("cannot create a temporary folder")?;
+    let started = Instant::now();
+    eprint!("learning the triangle's AG file for the placements (agp bench learn)...");
+    let ag_file = learn_ag(&bins, &work.path().join("ag"))?;
+    eprintln!(" {:.1} s", started.elapsed().as_secs_f64());
+    let mut c = Campaign {
+        rng: Rng::new(args.seed),
+        decks: Phase::ALL.into_iter().map(|p| (p, Deck::new(p))).collect(),
+        args,
+        bins,
+        work,
+        ag_file,
+        faults: Vec::new(),
+        runs: Vec::new(),
+        started: Instant::now(),
+    };
+    let mut index = 0;
+    let result = loop {
+        let left = c.args.faults.saturating_sub(c.injected());
+        if left == 0 {
+            break Ok(());
+        }
+        let phase = Phase::ALL[index % Phase::ALL.len()];
+        if let Err(e) = c.run(index, phase, left.min(c.args.faults_per_run)) {
+            break Err(e);
+        }
+        index += 1;
+    };
+    if std::io::stderr().is_terminal() {
+        eprintln!();
+    }
+    let interrupted = result.as_ref().is_err_and(is_interrupt);
+    if result.is_ok() || interrupted {
+        let report = Report::new(&c);
+        report.print(&c, interrupted);
+        if let Some(path) = &c.args.json {
+            let text =
+                serde_json::to_string_pretty(&report.json(&c)).context("cannot format the JSON")?;
+            std::fs::write(path, text + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+    }
+    result?;
+    let not_survived = c.faults.iter().filter(|f| !f.survived).count();
+    let lost = c.runs.iter().filter(|r| !r.completed).count();
+    let wrong = c.runs.iter().filter(|r| r.correct == Some(false)).count();
+    let files: usize = c.runs.iter().map(|r| r.files_left).sum();
+    Ok((not_survived + lost + wrong + files > 0).then(|| {
+        format!(
+            "{not_survived} fault(s) not survived, {lost} run(s) lost, {wrong} wrong, {files} file(s) left"
+        )
+    }))
+}
+
+/// The figures of a campaign.
+struct Report {
+    wall_s: f64,
+    /// Per (kind, phase): injected, survived, recoveries ms.
+    table: BTreeMap<(FaultKind, Phase), (u32, u32, Vec<f64>)>,
+}
+
+fn median(v: &[f64]) -> Option<f64> {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    (!v.is_empty()).then(|| v[v.len() / 2])
+}
+
+fn max(v: &[f64]) -> Option<f64> {
+    v.iter().copied().max_by(f64::total_cmp)
+}
+
+fn ms(v: Option<f64>) -> String {
+    v.map_or("-".to_owned(), |v| format!("{v:.0}"))
+}
+
+impl Report {
+    fn new(c: &Campaign) -> Self {
+        let mut table: BTreeMap<(FaultKind, Phase), (u32, u32, Vec<f64>)> = BTreeMap::new();
+        for f in &c.faults {
+            let e = table.entry((f.kind, f.phase)).or_default();
+            e.0 += 1;
+            e.1 += u32::from(f.survived);
+            e.2.extend(f.recovery_ms);
+        }
+        Self {
+            wall_s: c.started.elapsed().as_secs_f64(),
+            table,
+        }
+    }
+
+    fn longest(c: &Campaign) -> Option<&FaultRecord> {
+        c.faults
+            .iter()
+            .filter(|f| f.recovery_ms.is_some())
+            .max_by(|a, b| {
+                a.recovery_ms
+                    .unwrap_or(0.0)
+                    .total_cmp(&b.recovery_ms.unwrap_or(0.0))
+            })
+    }
+
+    fn print(&self, c: &Campaign, interrupted: bool) {
+        let injected = c.faults.len();
+        let survived = c.faults.iter().filter(|f| f.survived).count();
+        println!(
+            "fault campaign{}: {injected} faults in {} runs, seed {}, {:.0} s wall (release binaries in {})",
+            if interrupted { " (interrupted)" } else { "" },
+            c.runs.len(),
+            c.args.seed,
+            self.wall_s,
+            c.bins.dir().display()
+        );
+        println!(
+            "live = physics on the realtime clock with the estimator reading every frame, until `agp down`: it stands in for a live session until live sessions exist (no planner: every planner mode refuses the realtime clock)"
+        );
+        println!();
+        println!(
+            "{:<30} {:<6} {:>8} {:>8} {:>14} {:>14}",
+            "fault", "phase", "injected", "survived", "recovery p50", "recovery max"
+        );
+        for ((kind, phase), (n, ok, rec)) in &self.table {
+            println!(
+                "{:<30} {:<6} {:>8} {:>8} {:>11} ms {:>11} ms",
+                kind.label(),
+                phase.as_str(),
+                n,
+                ok,
+                ms(median(rec)),
+                ms(max(rec))
+            );
+        }
+        let all: Vec<f64> = c.faults.iter().filter_map(|f| f.recovery_ms).collect();
+        println!(
+            "{:<30} {:<6} {:>8} {:>8} {:>11} ms {:>11} ms",
+            "all",
+            "",
+            injected,
+            survived,
+            ms(median(&all)),
+            ms(max(&all))
+        );
+        println!();
+        println!(
+            "{:<6} {:>6} {:>9} {:>7} {:>5} {:>11}",
+            "phase", "runs", "completed", "correct", "lost", "files left"
+        );
+        for phase in Phase::ALL {
+            let runs: Vec<&RunRecord> = c.runs.iter().filter(|r| r.phase == phase).collect();
+            let completed = runs.iter().filter(|r| r.completed).count();
+            let correct = if phase == Phase::Live {
+                "n/a".to_owned()
+            } else {
+                runs.iter()
+                    .filter(|r| r.correct == Some(true))
+                    .count()
+                    .to_string()
+            };
+            let files: usize = runs.iter().map(|r| r.files_left).sum();
+            println!(
+                "{:<6} {:>6} {:>9} {:>7} {:>5} {:>11}",
+                phase.as_str(),
+                runs.len(),
+                completed,
+                correct,
+                runs.len() - completed,
+                files
+            );
+        }
+        let completed = c.runs.iter().filter(|r| r.completed).count();
+        let files: usize = c.runs.iter().map(|r| r.files_left).sum();
+        println!(
+            "{:<6} {:>6} {:>9} {:>7} {:>5} {:>11}",
+            "all",
+            c.runs.len(),
+            completed,
+            c.runs.iter().filter(|r| r.correct == Some(true)).count(),
+            c.runs.len() - completed,
+            files
+        );
+        println!();
+        match Self::longest(c) {
+            Some(f) => println!(
+                "longest recovery: {:.0} ms ({}, {} run {}, {:.1} s into it)",
+                f.recovery_ms.unwrap_or(0.0),
+                f.kind.label(),
+                f.phase.as_str(),
+                f.run,
+                f.at_s
+            ),
+            None => println!("longest recovery: none measured"),
+        }
+        let failed: Vec<&FaultRecord> = c.faults.iter().filter(|f| !f.survived).collect();
+        if !failed.is_empty() {
+            println!("faults not survived:");
+            for f in failed {
+                println!(
+                    "  run {} ({}) at {:.1} s: {}: {}",
+                    f.run,
+                    f.phase.as_str(),
+                    f.at_s,
+                    f.kind.label(),
+                    f.note
+                );
+            }
+        }
+        let bad: Vec<&RunRecord> = c
+            .runs
+            .iter()
+            .filter(|r| !r.completed || r.correct == Some(false) || r.files_left > 0)
+            .collect();
+        if !bad.is_empty() {
+            println!("runs lost, wrong or leaving files:");
+            for r in bad {
+                println!(
+                    "  run {} ({}, `{}`, {} fault(s), {} up(s), exit {}, {} file(s) left): {}",
+                    r.index,
+                    r.phase.as_str(),
+                    r.instance,
+                    r.faults,
+                    r.ups,
+                    r.exit.map_or("-".to_owned(), |c| c.to_string()),
+                    r.files_left,
+                    r.note
+                );
+            }
+        }
+    }
+
+    fn json(&self, c: &Campaign) -> Value {
+        let table: Vec<Value> = self
+            .table
+            .iter()
+            .map(|((kind, phase), (n, ok, rec))| {
+                json!({
+                    "fault": kind.label(),
+                    "phase": phase.as_str(),
+                    "injected": n,
+                    "survived": ok,
+                    "recovery_p50_ms": median(rec),
+                    "recovery_max_ms": max(rec),
+                })
+            })
+            .collect();
+        let faults: Vec<Value> = c
+            .faults
+            .iter()
+            .map(|f| {
+                json!({
+                    "run": f.run,
+                    "phase": f.phase.as_str(),
+                    "fault": f.kind.label(),
+                    "at_s": f.at_s,
+                    "pause_ms": f.pause_ms,
+                    "survived": f.survived,
+                    "recovery_ms": f.recovery_ms,
+                    "note": f.note,
+                })
+            })
+            .collect();
+        let runs: Vec<Value> = c
+            .runs
+            .iter()
+            .map(|r| {
+                json!({
+                    "run": r.index,
+                    "phase": r.phase.as_str(),
+                    "instance": r.instance,
+                    "faults": r.faults,
+                    "ups": r.ups,
+                    "completed": r.completed,
+                    "correct": r.correct,
+                    "exit": r.exit,
+                    "files_left": r.files_left,
+                    "wall_s": r.wall_s,
+                    "note": r.note,
+                })
+            })
+            .collect();
+        let longest = Self::longest(c);
+        json!({
+            "seed": c.args.seed,
+            "faults_requested": c.args.faults,
+            "faults_injected": c.faults.len(),
+            "faults_survived": c.faults.iter().filter(|f| f.survived).count(),
+            "runs": c.runs.len(),
+            "runs_completed": c.runs.iter().filter(|r| r.completed).count(),
+            "runs_correct": c.runs.iter().filter(|r| r.correct == Some(true)).count(),
+            "runs_with_verdict": c.runs.iter().filter(|r| r.correct.is_some()).count(),
+            "files_left": c.runs.iter().map(|r| r.files_left).sum::<usize>(),
+            "longest_recovery_ms": longest.and_then(|f| f.recovery_ms),
+            "longest_recovery_fault": longest.map(|f| format!("{} ({}, run {})", f.kind.label(), f.phase.as_str(), f.run)),
+            "wall_s": self.wall_s,
+            "trials_per_alpha": c.args.trials_per_alpha,
+            "live_session": "physics on the realtime clock and the estimator reading every frame until `agp down`, standing in for a live session until live sessions exist",
+            "by_fault_and_phase": table,
+            "fault_list": faults,
+            "run_list": runs,
+        })
+    }
+}

@@ -1,0 +1,145 @@
+//! The in-process world: the physics library stepped in this process and the estimator's
+//! perception ([`ObjectTracker`]) beside it, for the benchmarks' `--in-process` runs, the
+//! tests and the examples. The planner sees what it sees over the pipeline: the estimate
+//! of each frame, made before the planner acts on the frame, and its events taken before
+//! the next frame. It offers ground truth, so episodes run against it are judged; the
+//! planner reads it only as the `oracle`.
+
+use agp_affordance::AffordanceGradient;
+use agp_perception::{ObjectTracker, TrackerConfig, TrackerError};
+use agp_physics::{Sim, SimBuildError, SimConfig};
+use agp_planning::{
+    EpisodeConfig, EpisodeResult, EpisodeRunError, PlannerKind, Senses, Task, World,
+    WorldStepError, drive_episode,
+};
+use agp_shared_types::{LearnEvent, ObjectEstimate};
+use agp_world::{Pose, RobotDescription, Scenario};
+
+/// The physics library as a [`World`], perceived by an [`ObjectTracker`].
+pub struct InProcessWorld {
+    sim: Sim,
+    tracker: ObjectTracker,
+    /// The tracker's estimate of the latest frame.
+    estimate: ObjectEstimate,
+}
+
+impl InProcessWorld {
+    /// The world of `sim`, perceived for a robot of `robot`'s description; with `ag` the
+    /// tracker also locates the object (as the estimator does once it has gradients).
+    pub fn new(
+        sim: Sim,
+        robot: &RobotDescription,
+        ag: Option<&AffordanceGradient>,
+    ) -> Result<Self, TrackerError> {
+        let mut tracker = ObjectTracker::new(robot, TrackerConfig::default());
+        if let Some(ag) = ag {
+            tracker.set_gradient(ag)?;
+        }
+        let mut world = Self {
+            sim,
+            tracker,
+            estimate: ObjectEstimate::default(),
+        };
+        world.perceive();
+        Ok(world)
+    }
+
+    /// The tracker observes the latest frame and writes its estimate.
+    fn perceive(&mut self) {
+        let s = self.sim.sensors();
+        self.tracker
+            .observe(s.ir_sample, &s.ir_raw, s.odometry, s.fix, s.fix_seq);
+        self.estimate = ObjectEstimate {
+            step: self.sim.step_count(),
+            ..ObjectEstimate::default()
+        };
+        self.tracker.write_estimate(&mut self.estimate);
+    }
+
+    /// The simulation, for ground truth.
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    /// The simulation, to move things by hand (tests).
+    pub fn sim_mut(&mut self) -> &mut Sim {
+        &mut self.sim
+    }
+}
+
+impl World for InProcessWorld {
+    fn senses(&self) -> Senses {
+        let s = self.sim.sensors();
+        Senses {
+            ir_raw: s.ir_raw,
+            ir_sample: s.ir_sample,
+            odometry: s.odometry,
+            fix: s.fix,
+            fix_seq: s.fix_seq,
+        }
+    }
+
+    fn perceived(&self) -> &ObjectEstimate {
+        &self.estimate
+    }
+
+    fn tell(&mut self, event: LearnEvent) -> Result<(), WorldStepError> {
+        self.tracker.handle(&event);
+        Ok(())
+    }
+
+    fn sim_time(&self) -> f64 {
+        self.sim.sim_time()
+    }
+
+    fn step_count(&self) -> u64 {
+        self.sim.step_count()
+    }
+
+    fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), WorldStepError> {
+        self.sim.step(left_mps, right_mps);
+        self.perceive();
+        Ok(())
+    }
+
+    fn object_truth(&self) -> Option<Pose> {
+        Some(self.sim.object_pose())
+    }
+}
+
+/// Why an in-process episode could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum InProcessEpisodeError {
+    #[error(transparent)]
+    Sim(#[from] SimBuildError),
+    #[error(transparent)]
+    Tracker(#[from] TrackerError),
+    #[error(transparent)]
+    Episode(#[from] EpisodeRunError),
+}
+
+/// Runs one episode of `task` with `planner` on `scenario` against the in-process physics
+/// library (the object and robot at the scenario's start poses, sensor noise seeded by
+/// `config.seed`), judged by its ground truth. `ag` is required by the affordance and
+/// oracle planners.
+pub fn run_episode(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    ag: Option<&AffordanceGradient>,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+) -> Result<EpisodeResult, InProcessEpisodeError> {
+    let sim = Sim::new(
+        scenario,
+        robot,
+        SimConfig {
+            seed: config.seed,
+            ..SimConfig::default()
+        },
+    )?;
+    let mut world = InProcessWorld::new(sim, robot, ag)?;
+    let result = drive_episode(&mut world, robot, ag, planner, task, config)?;
+    // The judge: orientation modulo the object's true symmetry, which only it may read.
+    Ok(result.judged(task, scenario.object.shape.symmetry_order(), config))
+}

@@ -1,0 +1,34 @@
+//! The harness: everything that runs the system to measure or judge it, and never runs
+//! inside the pipeline. The benchmarks of `agp bench` (`bench_learn`, `bench_tasks`,
+//! `bench_paper`, over private pipelines of real processes by `pipeline_bench` or in
+//! process by `in_process`), the judge that scores a task by ground truth (`evaluation`),
+//! `agp probe` (`probe`), the learning benchmark against the physics library
+//! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
+//! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`).
+//!
+//! Ground truth is read here and in the physics library only (and by the `oracle`).
+
+pub mod bench_learn;
+pub mod bench_paper;
+pub mod bench_tasks;
+pub mod evaluation;
+pub mod hop;
+pub mod in_process;
+pub mod learn_bench;
+pub mod math;
+pub mod pipeline;
+pub mod pipeline_bench;
+pub mod probe;
+pub mod task_goals;
+
+pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode};
+pub use task_goals::{PlannerSummary, median, place_goals, trajectory_error};
+
+/// Writes one line to stdout; a closed stdout is no reason to panic (the SIGPIPE it raises
+/// stops `agp` cleanly).
+pub fn say(line: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}

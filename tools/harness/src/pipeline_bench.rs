@@ -1,0 +1,279 @@
+//! Benchmark episodes over the real pipeline: a private instance (`bench-<pid>`) with
+//! lockstep `agp-physics`, `agp-estimator` serving an AG file's gradients over the `grids`
+//! topic, and one `agp-planner` process per episode. The benchmark plays the experimenter
+//! and the judge: it puts the object and the robot back at the scenario's start before each
+//! episode (a reset, as the learning protocol does) and reads ground truth, which no
+//! planner but the oracle sees. Every file of the instance is removed at the end.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use agp_planning::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
+use agp_shared_types::Pose2;
+use agp_world::Scenario;
+use anyhow::{Context, Result, anyhow, bail};
+use iceoryx2::prelude::Node;
+
+use crate::evaluation::TruthRecorder;
+use agp_runtime::children::{GuardedChild, sibling_executable};
+
+/// Safety net of the waits on the pipeline's processes (never the check itself).
+const LINK_TIMEOUT: Duration = Duration::from_secs(60);
+/// Longest wall time one episode may take before the benchmark gives up on it.
+const EPISODE_WALL_LIMIT: Duration = Duration::from_secs(600);
+
+/// A running private pipeline for benchmark episodes.
+pub struct PipelineBench {
+    instance: Instance,
+    scenario_arg: String,
+    scenario: Scenario,
+    physics: GuardedChild,
+    estimator: Option<GuardedChild>,
+    /// The experimenter's hand: resets only, never a motor command.
+    driver: LockstepDriver,
+    truth: TruthRecorder,
+    _node: Node<AgpIpc>,
+    logs: tempfile::TempDir,
+    episodes: u32,
+    /// Ground-truth samples the evaluation missed (its buffer overflowed), all episodes.
+    pub truth_gaps: u64,
+}
+
+impl PipelineBench {
+    /// Starts physics (seeded with `seed`) and, with `ag`, the estimator serving it.
+    pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64) -> Result<Self> {
+        let scenario = Scenario::resolve(scenario_arg)?;
+        let name = format!("bench-{}", std::process::id());
+        let instance = Instance::new(&name).map_err(|e| anyhow!("instance `{name}`: {e}"))?;
+        // A bench of the same pid that died hard may have left files: they are ours.
+        instance
+            .remove_files()
+            .context("cannot clear the bench's instance files")?;
+        let logs = tempfile::tempdir().context("cannot create a folder for the episode logs")?;
+        let mut cmd = Command::new(sibling_executable("agp-physics")?);
+        cmd.args(["--instance", &name, "--scenario", scenario_arg])
+            .args(["--clock", "lockstep", "--idle-timeout-s", "0"])
+            .args(["--seed", &seed.to_string()])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        let physics = GuardedChild::spawn("agp-physics", &mut cmd)?;
+        let estimator = match ag {
+            Some(path) => {
+                let mut cmd = Command::new(sibling_executable("agp-estimator")?);
+                cmd.args(["--instance", &name, "--scenario", scenario_arg])
+                    .arg("--load")
+                    .arg(path)
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::null());
+                Some(GuardedChild::spawn("agp-estimator", &mut cmd)?)
+            }
+            None => None,
+        };
+        let driver = match LockstepDriver::connect(&instance, "bench", 0, false, LINK_TIMEOUT) {
+            Ok(d) => d,
+            Err(DriveError::Shutdown) => bail!("interrupted"),
+            Err(e) => return Err(e).context("cannot reach the bench's physics"),
+        };
+        let node = instance
+            .node("bench-judge", false)
+            .map_err(|e| anyhow!("cannot create the bench's node: {e:?}"))?;
+        let every = EpisodeConfig::for_scenario(&scenario).record_every_steps;
+        let truth = TruthRecorder::open(&instance, &node, every)?;
+        Ok(Self {
+            instance,
+            scenario_arg: scenario_arg.to_owned(),
+            scenario,
+            physics,
+            estimator,
+            driver,
+            truth,
+            _node: node,
+            logs,
+            episodes: 0,
+            truth_gaps: 0,
+        })
+    }
+
+    /// Runs one episode of `task` with `planner` from the scenario's start poses, judged by
+    /// ground truth with the tolerances of `config`.
+    pub fn episode(
+        &mut self,
+        planner: PlannerKind,
+        task: &Task,
+        config: &EpisodeConfig,
+    ) -> Result<EpisodeResult> {
+        self.episodes += 1;
+        let o = self.scenario.object.start;
+        let r = self.scenario.robot.start;
+        match self.driver.reset(o, r) {
+            Ok(_) => {}
+            Err(DriveError::Shutdown) => bail!("interrupted"),
+            Err(e) => return Err(e).context("cannot reset the bench's physics"),
+        }
+        // The episode starts from the reset: only its samples count.
+        self.truth.restart()?;
+
+        let report = self
+            .logs
+            .path()
+            .join(format!("episode-{}.json", self.episodes));
+        let stderr_path = self
+            .logs
+            .path()
+            .join(format!("episode-{}.stderr", self.episodes));
+        let mut cmd = Command::new(sibling_executable("agp-planner")?);
+        cmd.args(["--instance", self.instance.name()])
+            .args(["--scenario", &self.scenario_arg])
+            .args(["--clock", "lockstep", "--planner", planner.name()])
+            .arg("--report")
+            .arg(&report)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(
+                std::fs::File::create(&stderr_path)
+                    .with_context(|| format!("cannot create {}", stderr_path.display()))?,
+            );
+        match task {
+            Task::Place { goal } => {
+                cmd.args(["--mode", "place", "--goal"]).arg(format!(
+                    "{},{},{}",
+                    goal.x * 1e3,
+                    goal.y * 1e3,
+                    goal.theta.to_degrees()
+                ));
+            }
+            Task::Trajectory { .. } => {
+                cmd.args(["--mode", "trajectory"]);
+            }
+        }
+        let wall = Instant::now();
+        let mut child = GuardedChild::spawn("agp-planner", &mut cmd)?;
+        let status = loop {
+            self.truth.drain()?;
+            if let Some(status) = child.try_wait()? {
+                break status;
+            }
+            if agp_runtime::shutdown_requested() {
+                child.stop(Duration::from_secs(2))?;
+                bail!("interrupted");
+            }
+            if wall.elapsed() > EPISODE_WALL_LIMIT {
+                child.stop(Duration::from_secs(2))?;
+                bail!("planner `{planner}` did not end its episode within {EPISODE_WALL_LIMIT:?}");
+            }
+            std::thread::sleep(Duration::from_micros(500));
+        };
+        if !status.success() {
+            let text = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+            let tail: Vec<&str> = text.lines().rev().take(5).collect();
+            bail!(
+                "planner `{planner}` exited with {status}: {}",
+                tail.into_iter().rev().collect::<Vec<_>>().join(" / ")
+            );
+        }
+        let planner_view = PlannerView::read(&report)?;
+        let truth = self
+            .truth
+            .finish()?
+            .ok_or_else(|| anyhow!("no ground truth arrived during the episode"))?;
+        self.truth_gaps += self.truth.gaps;
+        let evaluation = Evaluation::judge(
+            task,
+            truth.object,
+            self.scenario.object.shape.symmetry_order(),
+            config,
+            std::mem::take(&mut self.truth.samples),
+        );
+        Ok(EpisodeResult {
+            planner,
+            end: planner_view.end,
+            pushes: planner_view.pushes,
+            circlings: planner_view.circlings,
+            sim_time_s: planner_view.sim_time_s,
+            wall_time_s: wall.elapsed().as_secs_f64(),
+            final_estimate: planner_view.final_estimate,
+            evaluation: Some(evaluation),
+            samples: Vec::new(),
+            final_truth: Some(truth.object),
+        })
+    }
+
+    /// Stops every process and removes every file of the instance.
+    pub fn stop(mut self) -> Result<()> {
+        let mut problems = Vec::new();
+        if let Some(e) = &mut self.estimator
+            && let Err(err) = e.stop(Duration::from_secs(5))
+        {
+            problems.push(format!("{err:#}"));
+        }
+        if let Err(err) = self.physics.stop(Duration::from_secs(5)) {
+            problems.push(format!("{err:#}"));
+        }
+        let instance = self.instance.clone();
+        drop(self);
+        if let Err(err) = instance.remove_files() {
+            problems.push(format!(
+                "cannot remove the files of instance `{}`: {err}",
+                instance.name()
+            ));
+        }
+        if problems.is_empty() {
+            Ok(())
+        } else {
+            bail!("{}", problems.join("; "))
+        }
+    }
+}
+
+/// The planner's own account of an episode (`agp-planner --report`).
+struct PlannerView {
+    end: EpisodeEnd,
+    pushes: u32,
+    circlings: u32,
+    sim_time_s: f64,
+    final_estimate: Option<Pose2>,
+}
+
+impl PlannerView {
+    fn read(path: &PathBuf) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("the planner wrote no report at {}", path.display()))?;
+        let v: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        let num = |k: &str| {
+            v.get(k)
+                .and_then(serde_json::Value::as_f64)
+                .ok_or_else(|| anyhow!("{}: no number `{k}`", path.display()))
+        };
+        let end_name = v.get("end").and_then(|e| e.as_str()).unwrap_or_default();
+        let end = EpisodeEnd::ALL
+            .into_iter()
+            .find(|e| e.name() == end_name)
+            .ok_or_else(|| anyhow!("{}: unknown end `{end_name}`", path.display()))?;
+        let final_estimate = v
+            .get("final_estimate")
+            .filter(|e| !e.is_null())
+            .map(|e| -> Result<Pose2> {
+                let f = |k: &str| {
+                    e.get(k)
+                        .and_then(serde_json::Value::as_f64)
+                        .ok_or_else(|| anyhow!("{}: no `final_estimate.{k}`", path.display()))
+                };
+                Ok(Pose2::new(
+                    f("x_mm")? * 1e-3,
+                    f("y_mm")? * 1e-3,
+                    f("theta_deg")?.to_radians(),
+                ))
+            })
+            .transpose()?;
+        Ok(Self {
+            end,
+            pushes: num("pushes")? as u32,
+            circlings: num("circlings")? as u32,
+            sim_time_s: num("sim_time_s")?,
+            final_estimate,
+        })
+    }
+}
