@@ -33,6 +33,10 @@ pub enum WorldStepError {
     /// over from finding the object.
     #[error("physics restarted")]
     Restarted,
+    /// The estimator restarted: what it perceived (the object's pose, its centroid) is
+    /// gone; the episode must start over from finding the object, in the same world.
+    #[error("the estimator restarted")]
+    EstimatorRestarted,
     /// The link to physics failed (no frame in time, a port error).
     #[error("{0}")]
     Link(String),

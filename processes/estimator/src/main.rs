@@ -67,6 +67,11 @@ struct Args {
     /// restarted estimator gets its gradients back from the file.
     #[arg(long)]
     reuse: bool,
+    /// Perceive only: neither learn nor serve gradients (for a planner that needs none,
+    /// such as `baseline`). The estimates carry the robot, contact and the object's
+    /// centroid; no pose without a gradient.
+    #[arg(long, conflicts_with_all = ["load", "reuse"])]
+    perceive_only: bool,
     /// Exit with an error when neither a frame nor an event arrives for this long,
     /// seconds; 0 waits until SIGTERM.
     #[arg(long, default_value_t = 0)]
@@ -112,11 +117,12 @@ fn run() -> Result<()> {
         }
         (None, false) => None,
     };
-    if load.is_none() {
+    if load.is_none() && !args.perceive_only {
         // Learning ends by saving there: find out now, not after the whole protocol.
         check_ag_destination(&saved)?;
     }
-    let mut estimator = Estimator::open(&instance, &scenario, load.is_some(), &args)?;
+    let learns = load.is_none() && !args.perceive_only;
+    let mut estimator = Estimator::open(&instance, &scenario, !learns, &args)?;
     if let Some(path) = &load {
         let gradient = AffordanceGradient::load_for(path, &scenario.name)
             .with_context(|| format!("cannot load the AG file {}", path.display()))?;

@@ -416,7 +416,13 @@ impl Ring {
             (acks.stamp >= taken.unwrap_or(before + 1)).then_some(Ok(()))
         });
         link.set_acks(acks);
-        link.check_estimator()?;
+        if let Err(restarted) = link.check_estimator() {
+            // The frame is taken all the same, so the next command answers it.
+            if taken.is_none() && !matches!(outcome, WaitOutcome::Shutdown) {
+                driver.await_frame()?;
+            }
+            return Err(restarted);
+        }
         match outcome {
             WaitOutcome::Ready(Ok(())) => {}
             WaitOutcome::Ready(Err(e)) => return Err(e.into()),

@@ -98,9 +98,7 @@ impl World for PipelineWorld {
             match e.downcast_ref::<DriveError>() {
                 Some(DriveError::Shutdown) => WorldStepError::Shutdown,
                 Some(DriveError::PhysicsRestarted) => WorldStepError::Restarted,
-                _ if e.is::<EstimatorRestarted>() => WorldStepError::Link(
-                    "the estimator restarted: it lost the object it tracked".into(),
-                ),
+                _ if e.is::<EstimatorRestarted>() => WorldStepError::EstimatorRestarted,
                 _ => WorldStepError::Link(format!("{e:#}")),
             }
         })?;
@@ -205,7 +203,7 @@ pub fn run(
     };
     // Steps were applied before this planner came: it takes over a world under way (the
     // oracle knows where the object is and needs no finding).
-    let taking_over = world.step_count() > 0 && !settings.planner.reads_ground_truth();
+    let mut taking_over = world.step_count() > 0 && !settings.planner.reads_ground_truth();
     println!(
         "planner `{}`{}: {} of `{}`",
         settings.planner,
@@ -228,6 +226,9 @@ pub fn run(
                 // A new world from the scenario's start: the robot faces the object.
                 Err(WorldStepError::Restarted) => {
                     println!("planner: physics restarted: the episode starts over");
+                }
+                Err(WorldStepError::EstimatorRestarted) => {
+                    println!("planner: the estimator restarted: the episode starts over");
                 }
                 Err(e) => return Err(anyhow!(e)),
             }
@@ -264,6 +265,12 @@ pub fn run(
                 // A new world from the scenario's start: the episode starts over, finding
                 // the object first.
                 println!("planner: physics restarted: the episode starts over");
+            }
+            Err(agp_planning::EpisodeRunError::World(WorldStepError::EstimatorRestarted)) => {
+                // The same world, but what the estimator perceived is gone: the episode
+                // starts over, finding the object first from wherever the robot is.
+                println!("planner: the estimator restarted: the episode starts over");
+                taking_over = !settings.planner.reads_ground_truth();
             }
             Err(e) => return Err(anyhow!(e)),
         }

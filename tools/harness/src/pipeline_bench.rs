@@ -42,7 +42,8 @@ pub struct PipelineBench {
 }
 
 impl PipelineBench {
-    /// Starts physics (seeded with `seed`) and, with `ag`, the estimator serving it.
+    /// Starts physics (seeded with `seed`) and the estimator, serving `ag`'s gradients if
+    /// given.
     pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64) -> Result<Self> {
         let scenario = Scenario::resolve(scenario_arg)?;
         let name = format!("bench-{}", std::process::id());
@@ -59,18 +60,16 @@ impl PipelineBench {
             .stdin(Stdio::null())
             .stdout(Stdio::null());
         let physics = GuardedChild::spawn("agp-physics", &mut cmd)?;
-        let estimator = match ag {
-            Some(path) => {
-                let mut cmd = Command::new(sibling_executable("agp-estimator")?);
-                cmd.args(["--instance", &name, "--scenario", scenario_arg])
-                    .arg("--load")
-                    .arg(path)
-                    .stdin(Stdio::null())
-                    .stdout(Stdio::null());
-                Some(GuardedChild::spawn("agp-estimator", &mut cmd)?)
-            }
-            None => None,
+        // The estimator perceives for every planner; with `ag` it also serves its gradients.
+        let mut cmd = Command::new(sibling_executable("agp-estimator")?);
+        cmd.args(["--instance", &name, "--scenario", scenario_arg])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        match ag {
+            Some(path) => cmd.arg("--load").arg(path),
+            None => cmd.arg("--perceive-only"),
         };
+        let estimator = Some(GuardedChild::spawn("agp-estimator", &mut cmd)?);
         let driver = match LockstepDriver::connect(&instance, "bench", 0, false, LINK_TIMEOUT) {
             Ok(d) => d,
             Err(DriveError::Shutdown) => bail!("interrupted"),
