@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use agp_runtime::{Instance, LockstepDriver};
 use agp_shared_types::{Pose2, stage};
-use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, run_agp};
+use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -198,20 +198,11 @@ fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_
     assert_eq!(count_instance_files(name), 0, "files of `{name}` are left");
 }
 
-#[test]
-fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_no_file() {
-    let name = "t-profile-learn";
-    let dir = LaunchDir::new(&learn_launch(name));
-    let mut up = AgpUp::start(&dir.launch(), &[]);
-    let guard = Down {
-        dir: dir.path(),
-        name,
-    };
-    // The planner says so once the estimator acknowledged the first frame: from then on
-    // every step goes through the three processes.
-    up.wait_for_lines("learning `triangle`", 1, TIMEOUT);
-
-    let (v, profile_pid) = profile_json(dir.path(), &["--instance", name]);
+/// Profiles the running instance `name` and checks that every step went through the three
+/// processes: the estimator's hops and stages, no physics->planner hop; then stops it.
+fn assert_three_process_ring(dir: &Path, name: &str, mut up: AgpUp) {
+    let guard = Down { dir, name };
+    let (v, profile_pid) = profile_json(dir, &["--instance", name]);
 
     // The estimator's hops, and no physics->planner: the planner acts on the estimate.
     let hops = v["hops"].as_array().expect("`hops` is a list");
@@ -252,7 +243,7 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
         v["waiting"].as_str().is_some_and(|w| !w.is_empty()),
         "no waiting strategy in {v}"
     );
-    let svg = std::fs::read_to_string(dir.path().join("out.svg")).expect("out.svg written");
+    let svg = std::fs::read_to_string(dir.join("out.svg")).expect("out.svg written");
     for series in [
         "physics-&gt;estimator",
         "estimator-&gt;planner",
@@ -266,8 +257,8 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
     );
     assert_eq!(count_instance_files(&format!("pfloor-{profile_pid}")), 0);
 
-    // Stop the learning run before its end; the supervisor then removes the instance.
-    let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    // Stop the run before its end; the supervisor then removes the instance.
+    let down = run_agp(dir, &["down", "--instance", name], TIMEOUT);
     let run = up.wait(TIMEOUT);
     assert!(
         down.status.success(),
@@ -279,6 +270,43 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
     );
     drop(guard);
     assert_eq!(count_instance_files(name), 0, "files of `{name}` are left");
+}
+
+#[test]
+fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_no_file() {
+    let name = "t-profile-learn";
+    let dir = LaunchDir::new(&learn_launch(name));
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    // The planner says so once the estimator acknowledged the first frame: from then on
+    // every step goes through the three processes.
+    up.wait_for_lines("learning `triangle`", 1, TIMEOUT);
+    assert_three_process_ring(dir.path(), name, up);
+}
+
+/// The placement task with the estimator serving a learned AG file, towards a goal far
+/// enough (800 mm and a half turn away) that the run outlasts the profile.
+fn place_launch(instance: &str, ag: &Path) -> String {
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
+         args = [\"--mode\", \"place\", \"--goal=600,600,180\"]\n\
+         ends_run = true\n",
+        ag.display()
+    )
+}
+
+#[test]
+fn profile_of_a_placement_reports_the_hops_through_the_estimator_and_leaves_no_file() {
+    let ag = learned_ag("triangle");
+    let name = "t-profile-place";
+    let dir = LaunchDir::new(&place_launch(name, &ag));
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    // The planner has the gradient and the estimator's first estimate: every step from now
+    // on goes physics -> estimator -> planner -> physics.
+    up.wait_for_lines("planner `affordance`: place at", 1, TIMEOUT);
+    assert_three_process_ring(dir.path(), name, up);
 }
 
 #[test]
