@@ -1,6 +1,6 @@
 //! Runs a few episodes and prints each: a development aid for the episode runner.
 //!
-//! `cargo run --release -p agp-planner --example episode_probe -- OBJECT PLANNER N [AG_FILE]`
+//! `cargo run --release -p agp-harness --example episode_probe -- OBJECT PLANNER N [AG_FILE]`
 //! (without an AG file, one is learned from ground truth first). PLANNER `trajectory`
 //! runs the affordance and baseline planners along the default path on N seeds and
 //! splits the error before and after x = 270 mm (where a bend of a custom path may be).

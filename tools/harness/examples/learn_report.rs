@@ -3,7 +3,7 @@
 //! then 200 unseen pushes to check the predictions and the poses from the trials'
 //! circlings, against the simulator's ground truth.
 //!
-//! `cargo run --release -p agp-estimator --example learn_report -- [OBJECT|FILE ...]
+//! `cargo run --release -p agp-harness --example learn_report -- [OBJECT|FILE ...]
 //!  [--seed N] [--trials N] [--method front-ir-mean|body-sweep|heading-line] [--eval N] [--push-s S]
 //!  [--alphas 0,15,-15]
 //!  [--no-approach-points] [--circle-defaults] [--save-dir DIR]`

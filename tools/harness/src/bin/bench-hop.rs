@@ -7,7 +7,7 @@
 //! every way out.
 //!
 //! ```text
-//! cargo run --release -p agp-bench --bin bench-hop -- --round-trips 20000 --json hop.json
+//! cargo run --release -p agp-harness --bin bench-hop -- --round-trips 20000 --json hop.json
 //! ```
 
 use std::path::PathBuf;

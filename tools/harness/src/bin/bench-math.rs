@@ -5,7 +5,7 @@
 //! reference / ours and the heap allocations per call.
 //!
 //! ```text
-//! cargo run --release -p agp-bench --bin bench-math -- --json math.json
+//! cargo run --release -p agp-harness --bin bench-math -- --json math.json
 //! ```
 
 use std::hint::black_box;

@@ -1,0 +1,124 @@
+//! The rules of the crate layout (ARCHITECTURE.md, "Crates and what each may depend on"),
+//! read from the manifests themselves: the logic lives in libraries, the process crates are
+//! thin binaries that depend on no other process crate, libraries depend on no process or
+//! tool crate, and ground truth's readers (the harness) are never a dependency of a
+//! process but the supervisor's.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ sits in the workspace")
+        .to_path_buf()
+}
+
+/// Every member's package name, folder (relative) and the agp crates it depends on, in
+/// every dependency table (normal, dev, build).
+fn members() -> BTreeMap<String, (String, Vec<String>)> {
+    let root = workspace_root();
+    let text = std::fs::read_to_string(root.join("Cargo.toml")).expect("the workspace manifest");
+    let ws: toml::Table = text.parse().expect("the workspace manifest is TOML");
+    let list = ws["workspace"]["members"].as_array().expect("members");
+    let mut out = BTreeMap::new();
+    for m in list {
+        let dir = m.as_str().expect("a member path").to_owned();
+        let text = std::fs::read_to_string(root.join(&dir).join("Cargo.toml"))
+            .unwrap_or_else(|e| panic!("{dir}/Cargo.toml: {e}"));
+        let man: toml::Table = text.parse().expect("a member manifest is TOML");
+        let name = man["package"]["name"].as_str().expect("name").to_owned();
+        let mut deps = Vec::new();
+        for table in ["dependencies", "dev-dependencies", "build-dependencies"] {
+            if let Some(t) = man.get(table).and_then(|t| t.as_table()) {
+                for (dep, spec) in t {
+                    if dep.starts_with("agp-") && dep != &name {
+                        deps.push(dep.clone());
+                    }
+                    let path = spec.get("path").and_then(|p| p.as_str()).unwrap_or("");
+                    assert!(
+                        path.is_empty() || path == ".",
+                        "{dir}: `{dep}` by path `{path}`: internal crates come from [workspace.dependencies]"
+                    );
+                }
+            }
+        }
+        out.insert(name, (dir, deps));
+    }
+    out
+}
+
+#[test]
+fn no_process_crate_depends_on_another_process_crate_or_on_the_harness_but_the_supervisor() {
+    let members = members();
+    let processes: Vec<&String> = members
+        .iter()
+        .filter(|(_, (dir, _))| dir.starts_with("processes/"))
+        .map(|(name, _)| name)
+        .collect();
+    assert_eq!(processes.len(), 4, "four process crates: {processes:?}");
+    for (name, (dir, deps)) in &members {
+        if !dir.starts_with("processes/") {
+            continue;
+        }
+        for d in deps {
+            assert!(
+                !processes.contains(&d),
+                "process crate `{name}` depends on process crate `{d}`"
+            );
+            if d == "agp-harness" {
+                assert_eq!(
+                    name, "agp-supervisor",
+                    "`{name}` depends on the harness (ground truth's reader)"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn libraries_depend_on_libraries_only() {
+    let members = members();
+    let libs: Vec<&String> = members
+        .iter()
+        .filter(|(_, (dir, _))| dir.starts_with("libs/") || dir == "shared-types")
+        .map(|(name, _)| name)
+        .collect();
+    for (name, (dir, deps)) in &members {
+        if !(dir.starts_with("libs/") || dir == "shared-types") {
+            continue;
+        }
+        for d in deps {
+            assert!(
+                libs.contains(&d),
+                "library `{name}` ({dir}) depends on `{d}`, which is not a library"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_planners_logic_does_not_depend_on_perception_nor_perception_on_the_planner() {
+    let members = members();
+    let deps = |n: &str| {
+        members
+            .get(n)
+            .unwrap_or_else(|| panic!("no crate `{n}`"))
+            .1
+            .clone()
+    };
+    // The planning library reads the estimator's estimates (shared-types payloads), never
+    // its code; tests may use it (a dev-dependency) to drive the routines.
+    let text = std::fs::read_to_string(workspace_root().join("libs/planning/Cargo.toml"))
+        .expect("libs/planning/Cargo.toml");
+    let man: toml::Table = text.parse().expect("TOML");
+    assert!(
+        man["dependencies"].get("agp-perception").is_none(),
+        "agp-planning depends on agp-perception: {:?}",
+        deps("agp-planning")
+    );
+    assert!(
+        !deps("agp-perception").contains(&"agp-planning".to_owned()),
+        "agp-perception depends on agp-planning"
+    );
+}
