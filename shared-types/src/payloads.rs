@@ -236,7 +236,11 @@ pub struct ObjectEstimate {
     /// The rotational symmetry the estimator learned from S (0 a disc, 1 none, k: k-fold),
     /// 255 while it has no gradient.
     pub symmetry_order: u8,
-    pub _pad: [u8; 3],
+    /// 1 when the front gap, within 45 mm, has stopped shrinking over the last five IR
+    /// samples although the robot drove forward: the object moves with the robot (a
+    /// corner met head-on, which slips between the front rays, shows so).
+    pub stalled: u8,
+    pub _pad: [u8; 2],
 }
 
 impl ObjectEstimate {
@@ -549,9 +553,11 @@ pub struct LearnEvent {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum LearnReportKind {
-    /// The shape was learned from the circling (`value`: border points).
+    /// The shape was learned from the circling (`value`: border points, `border_radius_m`:
+    /// the learned border's radius).
     ShapeLearned = 0,
-    /// The shape circling gave no usable shape (fatal for the run).
+    /// The shape circling gave no usable shape (fatal for the run; `border_radius_m` > 0:
+    /// the object is too large for the gradient's grid).
     ShapeFailed = 1,
     /// Trial `index` was learned.
     TrialLearned = 2,
@@ -582,7 +588,7 @@ impl LearnReportKind {
 /// The estimator's account of the learning phase and its predictions of test pushes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::LearnReport.v1")]
+#[type_name("agp::LearnReport.v2")]
 pub struct LearnReport {
     /// Running count of reports.
     pub seq: u64,
@@ -612,6 +618,11 @@ pub struct LearnReport {
     pub grids_seq: u64,
     /// Kind-specific value (see [`LearnReportKind`]).
     pub value: f64,
+    /// [`LearnReportKind::ShapeLearned`]: how far the border learned by the shape circling
+    /// reaches from the centroid (m), which the planner sets its start circle from;
+    /// [`LearnReportKind::ShapeFailed`]: how far the border seen reaches when the object is
+    /// too large for the gradient's grid, else 0.
+    pub border_radius_m: f64,
 }
 
 const _: () = {
@@ -621,7 +632,7 @@ const _: () = {
             && align_of::<LearnEvent>() == 8
     );
     assert!(
-        size_of::<LearnReport>() == 8 + 24 + 16 + 8 + 16 + 16 + 8 + 8 + 8
+        size_of::<LearnReport>() == 8 + 24 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 8
             && align_of::<LearnReport>() == 8
     );
 };

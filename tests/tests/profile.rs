@@ -200,7 +200,7 @@ fn profile_of_a_lockstep_run_reports_every_hop_stage_and_the_floor_in_order_and_
 
 /// Profiles the running instance `name` and checks that every step went through the three
 /// processes: the estimator's hops and stages, no physics->planner hop; then stops it.
-fn assert_three_process_ring(dir: &Path, name: &str, mut up: AgpUp) {
+fn assert_three_process_ring(dir: &Path, name: &str, up: AgpUp) {
     let guard = Down { dir, name };
     let (v, profile_pid) = profile_json(dir, &["--instance", name]);
 

@@ -1,7 +1,9 @@
 use agp_affordance::{
     AffordanceGradient, AffordanceLearner, Grid, LearnerBuildError, LearnerConfig, SampleAddError,
-    ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig,
+    ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig, learned_border_radius_m,
+    symmetry_order_of,
 };
+use agp_shared_types::GRID_SIDE;
 use agp_world::{Pose, RobotDescription};
 use glam::DVec2;
 
@@ -15,9 +17,12 @@ use crate::{
 pub struct LearningConfig {
     /// Alphas, grid and Gaussians of the gradients.
     pub learner: LearnerConfig,
-    /// How circlings are matched to the learned shape; set `symmetry_order` to the
-    /// object's ([`agp_world::ObjectShape::symmetry_order`]).
+    /// How circlings are matched to the learned shape. Its `symmetry_order` is not used:
+    /// the matcher takes [`Self::symmetry_order`]'s, or the one learned from S.
     pub matcher: ShapeMatcherConfig,
+    /// The object's rotational symmetry order (0 a disc, 1 none) for the matcher; `None`
+    /// learns it from the S of the shape circling ([`symmetry_order_of`]), from IR alone.
+    pub symmetry_order: Option<u32>,
     /// Which contact point the gradient is keyed by.
     pub contact_method: ContactMethod,
     /// Border points kept per buffer (a lap round a 100 mm object gives about a thousand).
@@ -41,16 +46,30 @@ pub struct LearningConfig {
 
 impl LearningConfig {
     /// The defaults for an object of rotational symmetry `symmetry_order` (0 a disc, 1
-    /// none): the paper's alphas, [`ContactMethod::HeadingLine`], 8192 points per buffer,
-    /// trials under 60 % inliers rejected, approach points added to S, border points
-    /// thinned to 1.5 mm apart.
+    /// none), given rather than learned: see [`LearningConfig::default`].
     pub fn for_symmetry(symmetry_order: u32) -> Self {
         Self {
+            symmetry_order: Some(symmetry_order),
+            ..Self::default()
+        }
+    }
+
+    /// Half the side of the gradients' grid, m: the farthest an object's border may reach
+    /// from its centroid to be learned.
+    pub fn grid_half_extent_m(&self) -> f64 {
+        self.learner.cell_size_m * GRID_SIDE as f64 / 2.0
+    }
+}
+
+impl Default for LearningConfig {
+    /// The paper's alphas, the symmetry order learned from S, [`ContactMethod::HeadingLine`],
+    /// 8192 points per buffer, trials under 60 % inliers rejected, approach points added to
+    /// S, border points thinned to 1.5 mm apart.
+    fn default() -> Self {
+        Self {
             learner: LearnerConfig::default(),
-            matcher: ShapeMatcherConfig {
-                symmetry_order,
-                ..ShapeMatcherConfig::default()
-            },
+            matcher: ShapeMatcherConfig::default(),
+            symmetry_order: None,
             contact_method: ContactMethod::default(),
             point_capacity: 8192,
             min_inlier_fraction: 0.6,
@@ -98,6 +117,19 @@ pub enum ShapeLearnError {
     /// The learned S gives no border to match against.
     #[error(transparent)]
     Matcher(#[from] ShapeMatcherBuildError),
+    /// The border seen while circling reaches beyond the gradients' grid: the object is too
+    /// large to learn.
+    #[error(
+        "the border seen reaches {:.0} mm from the centroid, the gradient's grid only {:.0} mm: the object is too large to learn",
+        reach_m * 1e3,
+        grid_half_extent_m * 1e3
+    )]
+    TooLarge {
+        /// Distance of the farthest border point seen from the centroid, m.
+        reach_m: f64,
+        /// Half the grid's side, m.
+        grid_half_extent_m: f64,
+    },
 }
 
 /// Why a trial could not start.
@@ -139,6 +171,11 @@ pub struct LearningSession {
     /// Border points added to each alpha's S (object frame), for thinning; same order as
     /// the config's alphas.
     shape_points: Vec<Vec<DVec2>>,
+    /// The symmetry order the matcher uses: the config's, or learned from the shape
+    /// circling's S.
+    symmetry_order: Option<u32>,
+    /// Radius of the border learned by the shape circling ([`learned_border_radius_m`]).
+    border_radius_m: Option<f64>,
     trials_learned: usize,
     trials_rejected: usize,
 }
@@ -187,6 +224,8 @@ impl LearningSession {
                 .collect(),
             trials_learned: 0,
             trials_rejected: 0,
+            symmetry_order: config.symmetry_order,
+            border_radius_m: None,
             config,
         })
     }
@@ -199,6 +238,19 @@ impl LearningSession {
     /// The recorder of the current trial (its phase, points and contact).
     pub fn recorder(&self) -> &TrialRecorder {
         &self.recorder
+    }
+
+    /// The object's rotational symmetry order the matcher uses (0 a disc, 1 none): the
+    /// config's, or once the shape is learned the one learned from its S.
+    pub fn symmetry_order(&self) -> Option<u32> {
+        self.symmetry_order
+    }
+
+    /// How far the border learned by the shape circling reaches from the centroid, m
+    /// ([`learned_border_radius_m`] of its S): where pushes start is set from it. `None`
+    /// before the shape is learned.
+    pub fn border_radius_m(&self) -> Option<f64> {
+        self.border_radius_m
     }
 
     /// The matcher against the learned shape, once the shape is learned.
@@ -243,8 +295,10 @@ impl LearningSession {
     }
 
     /// Ends the shape circling: its border points, moved into the object's frame by the
-    /// known pose, go into the S of every alpha, and the matcher is built on the combined
-    /// S. Returns the number of border points.
+    /// known pose, go into the S of every alpha; the symmetry order (unless the config
+    /// gives it) and the border's radius are learned from the combined S, and the matcher
+    /// is built on it. Returns the number of border points. Fails with
+    /// [`ShapeLearnError::TooLarge`] when a border point seen lies beyond the grid.
     pub fn finish_shape_circling(&mut self) -> Result<usize, ShapeLearnError> {
         self.recorder.end_shape_circling()?;
         let points = self.recorder.circle_points();
@@ -264,6 +318,14 @@ impl LearningSession {
                 .iter()
                 .map(|&p| to_obj.rotate(p - object.position()))
         };
+        let reach_m = points().map(|p| p.length()).fold(0.0, f64::max);
+        let grid_half_extent_m = self.config.grid_half_extent_m();
+        if reach_m.is_nan() || reach_m >= grid_half_extent_m {
+            return Err(ShapeLearnError::TooLarge {
+                reach_m,
+                grid_half_extent_m,
+            });
+        }
         for k in 0..self.config.learner.alphas_deg.len() {
             add_shape_points(
                 &mut self.learner,
@@ -274,14 +336,32 @@ impl LearningSession {
             )?;
         }
         let n = self.recorder.circle_points().len();
-        self.rebuild_matcher()?;
+        let shape = self.learner.gradient().combined_shape();
+        let order = *self
+            .symmetry_order
+            .get_or_insert_with(|| symmetry_order_of(&shape));
+        self.border_radius_m = learned_border_radius_m(&shape);
+        self.build_matcher(shape, order)?;
         Ok(n)
     }
 
-    /// Rebuilds the matcher on the combined S learned so far (after approaches refined it).
+    /// Rebuilds the matcher on the combined S learned so far (after approaches refined it),
+    /// with the symmetry order of the shape circling.
     pub fn rebuild_matcher(&mut self) -> Result<(), ShapeMatcherBuildError> {
         let shape = self.learner.gradient().combined_shape();
-        self.matcher = Some(ShapeMatcher::new(&shape, self.config.matcher.clone())?);
+        let order = match self.symmetry_order {
+            Some(k) => k,
+            None => *self.symmetry_order.insert(symmetry_order_of(&shape)),
+        };
+        self.build_matcher(shape, order)
+    }
+
+    fn build_matcher(&mut self, shape: Grid, order: u32) -> Result<(), ShapeMatcherBuildError> {
+        let config = ShapeMatcherConfig {
+            symmetry_order: order,
+            ..self.config.matcher.clone()
+        };
+        self.matcher = Some(ShapeMatcher::new(&shape, config)?);
         self.shape = Some(shape);
         Ok(())
     }
@@ -417,26 +497,19 @@ fn add_shape_points(
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_trial_before_the_shape_or_at_an_unknown_alpha_is_refused() {
-        let robot = RobotDescription::epuck();
-        let mut s =
-            LearningSession::new("square", &robot, LearningConfig::for_symmetry(4)).expect("valid");
-        assert_eq!(
-            s.begin_trial(0.0, Pose::default()),
-            Err(TrialStartError::NoShape)
-        );
-        // A shape from points on a 60 mm square, seen from its known pose.
+    /// Feeds `s` a shape circling of a square of half side `h` (m) centred at the origin:
+    /// 60 points per side, each read by IR1 from 20 mm.
+    fn circle_square(s: &mut LearningSession, robot: &RobotDescription, h: f64) {
         s.begin_shape_circling(Pose::default());
         let mut k = 0;
         for side in 0..4 {
             for t in 0..60 {
-                let u = -0.03 + 0.001 * f64::from(t);
+                let u = -h + 2.0 * h * f64::from(t) / 60.0;
                 let p = match side {
-                    0 => DVec2::new(u, -0.03),
-                    1 => DVec2::new(0.03, u),
-                    2 => DVec2::new(-u, 0.03),
-                    _ => DVec2::new(-0.03, -u),
+                    0 => DVec2::new(u, -h),
+                    1 => DVec2::new(h, u),
+                    2 => DVec2::new(-u, h),
+                    _ => DVec2::new(-h, -u),
                 };
                 // A robot facing the point from 20 mm, reading it with its IR1.
                 let sensor = &robot.ir_sensors[0];
@@ -450,6 +523,19 @@ mod tests {
                 s.observe(&IrView::new(k, raw, Pose::new(origin.x, origin.y, heading)));
             }
         }
+    }
+
+    #[test]
+    fn a_trial_before_the_shape_or_at_an_unknown_alpha_is_refused() {
+        let robot = RobotDescription::epuck();
+        let mut s =
+            LearningSession::new("square", &robot, LearningConfig::for_symmetry(4)).expect("valid");
+        assert_eq!(
+            s.begin_trial(0.0, Pose::default()),
+            Err(TrialStartError::NoShape)
+        );
+        // A shape from points on a 60 mm square, seen from its known pose.
+        circle_square(&mut s, &robot, 0.03);
         assert_eq!(s.finish_shape_circling(), Ok(240));
         let border = s.matcher().expect("built").border_points();
         assert!(border.len() > 100, "{} ridge points", border.len());
@@ -495,5 +581,44 @@ mod tests {
             ..LearningConfig::for_symmetry(1)
         };
         assert!(LearningSession::new("l", &robot, bad).is_err());
+    }
+
+    #[test]
+    fn the_symmetry_and_the_border_radius_are_learned_from_the_shape_circling() {
+        let robot = RobotDescription::epuck();
+        let mut s =
+            LearningSession::new("square", &robot, LearningConfig::default()).expect("valid");
+        assert_eq!((s.symmetry_order(), s.border_radius_m()), (None, None));
+        circle_square(&mut s, &robot, 0.03);
+        assert_eq!(s.finish_shape_circling(), Ok(240));
+        // A square is 4-fold symmetric; its corners lie 42.4 mm from the centre: the
+        // farthest ridge point of S lies there within 2 mm (measured 43.8 mm: the Gaussians
+        // of two faces add up just outside a corner).
+        assert_eq!(s.symmetry_order(), Some(4));
+        assert_eq!(s.matcher().expect("built").config().symmetry_order, 4);
+        let r = s.border_radius_m().expect("a border");
+        assert!(
+            (r - 0.03 * 2f64.sqrt()).abs() <= 0.002,
+            "border radius {r} m"
+        );
+    }
+
+    #[test]
+    fn a_border_seen_beyond_the_grid_is_refused_as_too_large() {
+        let robot = RobotDescription::epuck();
+        let mut s = LearningSession::new("huge", &robot, LearningConfig::default()).expect("valid");
+        // A 300 mm square: its corners lie 212 mm out, the grid holds 128 mm.
+        circle_square(&mut s, &robot, 0.15);
+        match s.finish_shape_circling() {
+            Err(ShapeLearnError::TooLarge {
+                reach_m,
+                grid_half_extent_m,
+            }) => {
+                assert!((reach_m - 0.15 * 2f64.sqrt()).abs() < 0.01, "{reach_m}");
+                assert!((grid_half_extent_m - 0.128).abs() < 1e-9);
+            }
+            other => panic!("not refused as too large: {other:?}"),
+        }
+        assert!(s.matcher().is_none());
     }
 }

@@ -2,17 +2,23 @@
 
 #![warn(missing_docs)]
 
+mod approach_contact;
 mod contact_estimator;
 mod contact_sense;
 mod ir_view;
+mod learn_events;
 mod learning_session;
 mod object_tracker;
 mod robot_localizer;
 mod trial_recorder;
 
+pub use approach_contact::{
+    ApproachContact, STALL_MAX_GAP, STALL_MIN_TRAVEL, STALL_SAMPLES, STALL_SHARE,
+};
 pub use contact_estimator::{ContactEstimates, ContactEstimator, ContactMethod, LearnedShape};
 pub use contact_sense::ContactSense;
 pub use ir_view::IrView;
+pub use learn_events::{LearnProblem, LearnReply, ProtocolLearner};
 pub use learning_session::{
     LearningConfig, LearningSession, SessionBuildError, ShapeLearnError, TrialLearnError,
     TrialStartError,

@@ -22,6 +22,7 @@ use agp_shared_types::{LearnEvent, LearnEventKind, ObjectEstimate, Pose2, angle}
 use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point};
 use glam::DVec2;
 
+use crate::ApproachContact;
 use crate::{ContactSense, RobotLocalizer};
 
 /// Sectors of [`ObjectEstimate::border_seen`]: 10 degrees each round the estimated centre.
@@ -185,6 +186,7 @@ pub struct ObjectTracker {
     last_sample: Option<u64>,
     last_raw: [f32; 8],
     front_gap: Option<f64>,
+    approach: ApproachContact,
 
     // The border.
     circling: bool,
@@ -239,6 +241,7 @@ impl ObjectTracker {
             last_sample: None,
             last_raw: [0.0; 8],
             front_gap: None,
+            approach: ApproachContact::new(),
             circling: false,
             points: Vec::with_capacity(config.capacity),
             dropped: 0,
@@ -350,6 +353,8 @@ impl ObjectTracker {
     ) {
         self.robot_pose = self.localizer.update(odometry, fix, fix_seq);
         self.front_gap = self.sense.front_gap(ir_raw);
+        // Travel by odometry: smooth, where the fused pose jumps at each fix.
+        self.approach.observe(ir_sample, self.front_gap, odometry);
         self.last_raw = *ir_raw;
         if self.last_sample != Some(ir_sample) {
             self.last_sample = Some(ir_sample);
@@ -562,6 +567,7 @@ impl ObjectTracker {
             .front_gap
             .is_some_and(|g| g <= self.config.contact_gap_m);
         out.contact = u8::from(contact);
+        out.stalled = u8::from(self.approach.stalled());
         out.contact_point = match self.front_gap {
             Some(gap) if contact && self.valid => {
                 let ahead = self.robot_pose.position()
@@ -599,6 +605,7 @@ impl ObjectTracker {
         self.last_sample = None;
         self.last_raw = [0.0; 8];
         self.front_gap = None;
+        self.approach.reset();
         self.circling = false;
         self.points.clear();
         self.dropped = 0;

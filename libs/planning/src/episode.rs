@@ -34,7 +34,7 @@ use std::time::Instant;
 
 use agp_affordance::{AffordanceGradient, Prediction, learned_border_radius_m, symmetry_order_of};
 use agp_shared_types::{LearnEvent, LearnEventKind, Pose2};
-use agp_world::{Pose, RobotDescription, Scenario};
+use agp_world::{Pose, RobotDescription, TaskSpec};
 use glam::DVec2;
 
 use crate::{
@@ -112,7 +112,7 @@ pub enum Task {
     Trajectory { path: Vec<DVec2> },
 }
 
-/// How an episode runs. [`EpisodeConfig::for_scenario`] gives the defaults.
+/// How an episode runs. [`EpisodeConfig::for_task`] gives the defaults.
 #[derive(Debug, Clone)]
 pub struct EpisodeConfig {
     /// Approach and push; `push_duration` is the learned push's (the AG predicts that
@@ -186,9 +186,9 @@ pub struct EpisodeConfig {
 }
 
 impl EpisodeConfig {
-    /// The defaults for `scenario`: its tolerance, pushes and seed; the learning
-    /// protocol's push (0.5 s at 100 mm/s after an IR-inferred contact).
-    pub fn for_scenario(scenario: &Scenario) -> Self {
+    /// The defaults for `task` (a scenario's task: its tolerance, pushes and seed; nothing
+    /// of the object); the learning protocol's push (0.5 s at 100 mm/s after contact).
+    pub fn for_task(task: &TaskSpec) -> Self {
         Self {
             push: PushSettings {
                 push_duration: 0.5,
@@ -200,9 +200,9 @@ impl EpisodeConfig {
             backoff_s: 0.15,
             backoff_speed: 0.08,
             fix_gain: 0.3,
-            tolerance_m: scenario.task.tolerance_m,
-            tolerance_rad: scenario.task.tolerance_rad,
-            max_pushes: scenario.task.max_pushes,
+            tolerance_m: task.tolerance_m,
+            tolerance_rad: task.tolerance_rad,
+            max_pushes: task.max_pushes,
             max_pushes_between_estimates: 5,
             error_growth: 0.15,
             error_floor_m: 0.001,
@@ -213,7 +213,7 @@ impl EpisodeConfig {
             lookahead_m: 0.04,
             record_every_steps: 32,
             max_sim_time_s: 3000.0,
-            seed: scenario.task.seed,
+            seed: task.seed,
             spread_weight: 1.0,
             reach_rotation_weight_m_per_rad: 0.03,
             push_fractions: vec![1.0, 0.5, 0.25],
@@ -425,7 +425,6 @@ pub fn drive_episode<W: World>(
     };
     let start_s = world.sim_time();
     let mut run = Run {
-        ir_period_s: 1.0 / robot.ir_rate_hz,
         robot: robot.clone(),
         circling: CircleRoutine::new(config.circle, robot, start_s),
         waypoints: Vec::new(),
@@ -1021,8 +1020,6 @@ struct PushDone {
 struct Run<'a, W: World> {
     world: &'a mut W,
     robot: RobotDescription,
-    /// The IR sampling period, s.
-    ir_period_s: f64,
     config: &'a EpisodeConfig,
     /// One routine for every circling, restarted each time: its buffers are allocated once.
     circling: CircleRoutine,
@@ -1229,9 +1226,8 @@ impl<W: World> Run<'_, W> {
         let mut contact = None;
         loop {
             let pose = self.pose();
-            let s = self.world.senses();
-            let gap = self.world.perceived().front_gap();
-            let (l, r) = routine.update(gap, self.ir_period_s, self.world.sim_time(), s.ir_sample);
+            let seen = self.world.perceived();
+            let (l, r) = routine.step(seen.front_gap(), seen.stalled == 1, self.world.sim_time());
             match routine.phase() {
                 PushPhase::Push { .. } => {
                     if contact.is_none() {

@@ -1,7 +1,8 @@
-//! The planner's logic, free of shared memory: contact inference from IR, the push, circling and travel routines, the push choice, and episodes of the benchmark tasks (Algorithm 5) against any [`World`]: the physics process over iceoryx2 or, with feature `sim`, the physics library in-process.
+//! The planner's logic, free of shared memory: contact inference from IR, the push, circling and travel routines, the push choice, the learning protocol against any [`LearnWorld`], and episodes of the benchmark tasks (Algorithm 5) against any [`World`]: the physics process over iceoryx2 or, with feature `sim`, the physics library in-process.
 
 mod circle_routine;
 mod episode;
+mod learning_protocol;
 mod push_choice;
 mod push_routine;
 mod travel;
@@ -12,6 +13,10 @@ pub use circle_routine::{CircleOutcome, CirclePhase, CircleRoutine, CircleSettin
 pub use episode::{
     EpisodeConfig, EpisodeEnd, EpisodeResult, EpisodeRunError, Evaluation, PlannerKind,
     PlannerParseError, PoseSample, Task, distance_to_path, drive_episode, lookahead_point,
+};
+pub use learning_protocol::{
+    ALPHAS_DEG, Disruption, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
+    LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun,
 };
 pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};

@@ -21,7 +21,7 @@ pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
 pub use scenario::{
     ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Localization, MAX_POLYGON_VERTICES, MAX_POSE_ANGLE_DEG,
     MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape, ObjectSpec, Pose,
-    RobotSetup, Scenario, ScenarioLoadError, TaskKind, TaskSpec,
+    RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind, TaskSpec,
 };
 
 /// 1-based line number of byte offset `offset` in `text`.

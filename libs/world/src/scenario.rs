@@ -148,7 +148,9 @@ pub struct TaskSpec {
     pub seed: u64,
 }
 
-/// A whole scenario: object, robot and task.
+/// A whole scenario: object, robot and task. The object's spec is ground truth: physics,
+/// the judge, the probe and the `oracle` read it; the estimator and the planners get a
+/// [`ScenarioBrief`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scenario {
     pub name: String,
@@ -157,6 +159,45 @@ pub struct Scenario {
     pub object: ObjectSpec,
     pub robot: RobotSetup,
     pub task: TaskSpec,
+}
+
+/// What the estimator and the planners may read of a scenario: its name (which AG file),
+/// the robot's start and the noise of its senses, the task, and where the experimenter
+/// puts the object back for the learning protocol. Nothing of the object's shape, size,
+/// mass or friction: the object's [`ObjectSpec`] is for physics, the judge, the probe and
+/// the `oracle` alone, and a process that holds only a brief cannot reach it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioBrief {
+    pub name: String,
+    /// Where it came from: a file path, or `built-in`.
+    pub source: String,
+    pub robot: RobotSetup,
+    pub task: TaskSpec,
+    /// Where the experimenter puts the object back before each step of the learning
+    /// protocol (world frame): the lab's marked spot, which fixes the frame the gradient is
+    /// learned in. In a task the object is wherever it is: only the estimator's estimate
+    /// says where.
+    pub learning_placement: Pose,
+}
+
+impl ScenarioBrief {
+    /// The brief of a built-in scenario or a scenario file (see [`Scenario::resolve`]).
+    pub fn resolve(name_or_file: &str) -> Result<Self, ScenarioLoadError> {
+        Scenario::resolve(name_or_file).map(|s| s.brief())
+    }
+}
+
+impl Scenario {
+    /// What the estimator and the planners may read of it.
+    pub fn brief(&self) -> ScenarioBrief {
+        ScenarioBrief {
+            name: self.name.clone(),
+            source: self.source.clone(),
+            robot: self.robot.clone(),
+            task: self.task.clone(),
+            learning_placement: self.object.start,
+        }
+    }
 }
 
 /// Why a scenario could not be loaded. Every variant names the file; parse and validation

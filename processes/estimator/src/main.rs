@@ -25,14 +25,14 @@ use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
 use agp_perception::{
-    IrView, LearningConfig, LearningSession, ObjectTracker, TrackerConfig, TrialPhase,
+    IrView, LearnProblem, LearningConfig, ObjectTracker, ProtocolLearner, TrackerConfig,
 };
 use agp_runtime::{
     AgpIpc, Instance, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
 };
 use agp_shared_types::{
-    EstimatorLearning, GRID_SIDE, GradientGrid, GridKind, IrFrame, LearnEvent, LearnEventKind,
-    LearnReport, LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, monotonic_ns, stage,
+    EstimatorLearning, GradientGrid, GridKind, IrFrame, LearnEvent, LearnEventKind, LearnReport,
+    LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, monotonic_ns, stage,
 };
 use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, anyhow, bail};
@@ -53,7 +53,8 @@ struct Args {
     /// Instance name, shared with the other processes of the pipeline.
     #[arg(long, env = "AGP_INSTANCE")]
     instance: String,
-    /// Built-in scenario or scenario file: which object is learned (its name and symmetry).
+    /// Built-in scenario or scenario file: which object is learned (its name: its shape and
+    /// size are learned from the shape circling).
     #[arg(long, env = "AGP_SCENARIO", default_value = "triangle")]
     scenario: String,
     /// Folder the AG file is saved in, as `<object>.ag`.
@@ -209,22 +210,15 @@ struct State {
     estimates_wake: Notifier<AgpIpc>,
     reports: Publisher<AgpIpc, LearnReport, ()>,
     reports_wake: Notifier<AgpIpc>,
-    /// The session under way (`None` once learning ended, or with `--load`).
-    session: Option<LearningSession>,
+    /// The learner of the planner's protocol (`None` with `--load` or `--perceive-only`).
+    learner: Option<ProtocolLearner>,
     report_seq: u64,
-    trials_total: u32,
     /// Set when the planner said learning is done: the gradient to publish and save.
     finished: Option<AffordanceGradient>,
-    /// Trials learned and rejected when the session ended.
-    final_counts: (u32, u32),
     grids_seq: u64,
-    /// The planner's learning session the learning session holds (0: no event yet).
-    learn_session: u64,
     /// When this estimator started (CLOCK_MONOTONIC, ns): carried by every estimate, so a
     /// planner sees a restarted estimator.
     start_ns: u64,
-    /// The scenario learned, for a session started over.
-    scenario: Scenario,
     /// Perception: the robot, contact, and the object in a task.
     tracker: ObjectTracker,
     /// The newest planner session whose task events the tracker takes (a planner swapped
@@ -232,14 +226,12 @@ struct State {
     task_session: u64,
     /// Step of the last frame observed (a smaller one: physics restarted).
     last_step: Option<u64>,
+    /// Reset count of the last frame observed (another: the world was put back).
+    last_reset: Option<u64>,
 }
 
 fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
     move |e| anyhow!("cannot open {what}: {e:?}")
-}
-
-fn view(e: &LearnEvent) -> IrView {
-    IrView::new(e.ir_sample, e.ir_raw, e.odometry)
 }
 
 impl Estimator {
@@ -260,10 +252,10 @@ impl Estimator {
             .learn_reports(&node)
             .map_err(open_err("the learn reports"))?;
         let grids = instance.grids(&node).map_err(open_err("the grids"))?;
-        let session = if loading {
+        let learner = if loading {
             None
         } else {
-            Some(session(scenario)?)
+            Some(learner(scenario)?)
         };
         let state = State {
             frames: frames
@@ -296,18 +288,15 @@ impl Estimator {
                 .notifier_builder()
                 .create()
                 .map_err(open_err("the report notifier"))?,
-            session,
+            learner,
             report_seq: 0,
-            trials_total: 0,
             finished: None,
-            final_counts: (0, 0),
             grids_seq: 0,
-            learn_session: 0,
             start_ns: monotonic_ns(),
-            scenario: scenario.clone(),
             tracker: ObjectTracker::new(&RobotDescription::epuck(), TrackerConfig::default()),
             task_session: 0,
             last_step: None,
+            last_reset: None,
         };
         // Frames and learn events notify the same event service.
         let listener = frames
@@ -403,20 +392,24 @@ impl Estimator {
         self.publish(gradient)?;
         let path = self.results.join(format!("{}.ag", self.object));
         let saved = save(gradient, &path);
-        let (learned, rejected) = self.state.counts();
-        self.report(LearnReport {
-            kind: LearnReportKind::Learned as u32,
-            trials_learned: learned,
-            trials_rejected: rejected,
-            trials_total: self.state.trials_total,
-            valid: u32::from(saved.is_ok()),
-            grids_seq: self.grids_seq,
-            ..LearnReport::default()
-        })?;
+        let report = match &self.state.learner {
+            Some(l) => l.learned_report(self.grids_seq, saved.is_ok()),
+            None => LearnReport {
+                kind: LearnReportKind::Learned as u32,
+                valid: u32::from(saved.is_ok()),
+                grids_seq: self.grids_seq,
+                ..LearnReport::default()
+            },
+        };
+        let (learned, rejected, total) = (
+            report.trials_learned,
+            report.trials_rejected,
+            report.trials_total,
+        );
+        self.report(report)?;
         println!(
-            "agp-estimator: learned `{}`: {learned} trials learned, {rejected} rejected of {}; {} grids published (seq {}); AG file {}",
+            "agp-estimator: learned `{}`: {learned} trials learned, {rejected} rejected of {total}; {} grids published (seq {}); AG file {}",
             self.object,
-            self.state.trials_total,
             gradient.alphas_deg().count() * GridKind::ALL.len(),
             self.grids_seq,
             if saved.is_ok() {
@@ -485,31 +478,16 @@ fn save(gradient: &AffordanceGradient, path: &Path) -> Result<()> {
         .with_context(|| format!("cannot save the AG file {}", path.display()))
 }
 
-/// The learning session of `scenario`'s object.
-fn session(scenario: &Scenario) -> Result<LearningSession> {
+/// The learner of `scenario`'s object: its symmetry order and its size are learned from
+/// the shape circling (an object too large for the gradient's grid fails there, see
+/// [`agp_perception::ShapeLearnError::TooLarge`]); the scenario gives only its name.
+fn learner(scenario: &Scenario) -> Result<ProtocolLearner> {
     let robot = RobotDescription::epuck();
-    let shape = &scenario.object.shape;
-    let config = LearningConfig::for_symmetry(shape.symmetry_order());
-    let half_extent = config.learner.cell_size_m * GRID_SIDE as f64 / 2.0;
-    if shape.radius().is_nan() || shape.radius() >= half_extent {
-        bail!(
-            "`{}` is too large to learn: it reaches {:.0} mm from its centroid, the gradient's grid only {:.0} mm",
-            scenario.name,
-            shape.radius() * 1e3,
-            half_extent * 1e3
-        );
-    }
-    LearningSession::new(&scenario.name, &robot, config)
+    ProtocolLearner::new(&scenario.name, &robot, LearningConfig::default())
         .with_context(|| format!("cannot learn `{}`", scenario.name))
 }
 
 impl State {
-    fn counts(&self) -> (u32, u32) {
-        self.session.as_ref().map_or(self.final_counts, |s| {
-            (s.trials_learned() as u32, s.trials_rejected() as u32)
-        })
-    }
-
     /// Handles what arrived: returns whether anything did. Each frame is preceded by the
     /// events sent before it, and acknowledged once observed. A frame allocates nothing
     /// (`tests/tests/pipeline_allocations.rs` counts).
@@ -529,11 +507,15 @@ impl State {
             self.drain_events()?;
             {
                 let _in_perception = alloc_count::enter(alloc_count::Region::Work);
-                if self.last_step.is_some_and(|last| frame.step < last) {
-                    // Physics restarted: a new world, the object no longer where it was.
+                if self.last_step.is_some_and(|last| frame.step < last)
+                    || self.last_reset.is_some_and(|r| r != frame.reset_seq)
+                {
+                    // Physics restarted, or the experimenter put the object and the robot
+                    // back: a new world, nothing where it was.
                     self.tracker.reset();
                 }
                 self.last_step = Some(frame.step);
+                self.last_reset = Some(frame.reset_seq);
                 self.tracker.observe(
                     frame.ir_sample,
                     &frame.ir_raw,
@@ -542,9 +524,9 @@ impl State {
                     frame.fix_seq,
                 );
             }
-            if let Some(s) = &mut self.session {
+            if let Some(l) = &mut self.learner {
                 let _in_learning = alloc_count::enter(alloc_count::Region::Work);
-                s.observe(&IrView::from(&frame));
+                l.observe(&IrView::from(&frame));
             }
             self.acknowledge(&frame, received)?;
             alloc_count::message_done();
@@ -571,10 +553,10 @@ impl State {
 
     /// The frame's estimate: no pose during learning, the frame's trace and publish stamp.
     fn acknowledge(&mut self, frame: &IrFrame, received_ns: u64) -> Result<()> {
-        let learning = match (&self.session, self.learn_session) {
-            (None, _) => EstimatorLearning::No,
-            (Some(_), 0) => EstimatorLearning::Waiting,
-            (Some(_), _) => EstimatorLearning::UnderWay,
+        let learning = match &self.learner {
+            Some(l) if l.is_learning() && l.learn_session() == 0 => EstimatorLearning::Waiting,
+            Some(l) if l.is_learning() => EstimatorLearning::UnderWay,
+            _ => EstimatorLearning::No,
         };
         let mut e = ObjectEstimate {
             step: frame.step,
@@ -617,22 +599,6 @@ impl State {
         Ok(())
     }
 
-    /// A trial report of `kind` for `event`, with the counts so far.
-    fn trial_report(&self, kind: LearnReportKind, event: &LearnEvent) -> LearnReport {
-        let (learned, rejected) = self.counts();
-        LearnReport {
-            kind: kind as u32,
-            index: event.index,
-            trials_learned: learned,
-            trials_rejected: rejected,
-            trials_total: self.trials_total,
-            step: event.step,
-            alpha_deg: event.alpha_deg,
-            grids_seq: self.grids_seq,
-            ..LearnReport::default()
-        }
-    }
-
     fn handle(&mut self, event: &LearnEvent) -> Result<()> {
         let Some(kind) = LearnEventKind::from_u32(event.kind) else {
             eprintln!("agp-estimator: unknown learn event kind {}", event.kind);
@@ -653,104 +619,23 @@ impl State {
             }
             return Ok(());
         }
-        if self.session.is_none() || kind as u32 > LearnEventKind::LearningDone as u32 {
-            // Learning is over (or the gradients came from a file), or not a step of the
-            // learning protocol.
-            return Ok(());
-        }
-        if event.session != self.learn_session {
-            if self.learn_session != 0 {
-                // Another run of the protocol: its planner restarted. Everything learned
-                // from the previous one (a half-done trial included) goes, so no trial is
-                // counted twice.
-                let (learned, rejected) = self.counts();
-                println!(
-                    "agp-estimator: a new learning session from the planner: the {} trial(s) of the previous one are dropped and learning starts over",
-                    learned + rejected
-                );
-                self.session = Some(session(&self.scenario)?);
-            }
-            self.learn_session = event.session;
-        }
-        let Some(session) = &mut self.session else {
+        // A step of the learning protocol: the learner's (nothing after learning, or with
+        // the gradients from a file).
+        let Some(learner) = &mut self.learner else {
             return Ok(());
         };
-        self.trials_total = self.trials_total.max(event.total);
-        let v = view(event);
-        let object = event.object;
-        match kind {
-            LearnEventKind::ShapeBegin => {
-                session.begin_shape_circling(object);
-                session.observe(&v);
-            }
-            LearnEventKind::ShapeEnd => {
-                let r = session.finish_shape_circling();
-                let mut report = self.trial_report(LearnReportKind::ShapeLearned, event);
-                match r {
-                    Ok(points) => report.value = points as f64,
-                    Err(e) => {
-                        eprintln!("agp-estimator: the shape circling gave no shape: {e}");
-                        report.kind = LearnReportKind::ShapeFailed as u32;
-                    }
-                }
-                self.report(report)?;
-            }
-            LearnEventKind::TrialBegin => {
-                if let Err(e) = session.begin_trial(event.alpha_deg, object) {
-                    eprintln!("agp-estimator: trial {} cannot start: {e}", event.index);
-                    session.abandon_trial();
-                    let r = self.trial_report(LearnReportKind::TrialRejected, event);
-                    self.report(r)?;
-                } else {
-                    session.observe(&v);
-                }
-            }
-            LearnEventKind::Contact => {
-                if session.recorder().phase() == TrialPhase::Approach
-                    && let Err(e) = session.infer_contact(&v)
-                {
-                    eprintln!("agp-estimator: trial {}: {e}", event.index);
-                }
-            }
-            LearnEventKind::PushEnd => {
-                if event.flag == 1 && session.recorder().phase() == TrialPhase::Push {
-                    if let Err(e) = session.end_push(&v) {
-                        eprintln!("agp-estimator: trial {}: {e}", event.index);
-                    }
-                } else if session.recorder().phase() != TrialPhase::Idle {
-                    session.abandon_trial();
-                    let r = self.trial_report(LearnReportKind::TrialRejected, event);
-                    self.report(r)?;
-                }
-            }
-            LearnEventKind::TrialEnd => {
-                if session.recorder().phase() != TrialPhase::Circling {
-                    return Ok(());
-                }
-                let result = session.finish_trial();
-                let mut r = self.trial_report(LearnReportKind::TrialLearned, event);
-                match result {
-                    Ok(record) => {
-                        r.contact_point = record.outcome.contact_point_obj.to_array();
-                        r.displacement = record.outcome.displacement_obj.to_array();
-                        r.rotation_rad = record.outcome.rotation_rad;
-                        r.value = record.matched.inlier_fraction;
-                    }
-                    Err(e) => {
-                        eprintln!("agp-estimator: trial {} rejected: {e}", event.index);
-                        r.kind = LearnReportKind::TrialRejected as u32;
-                    }
-                }
-                self.report(r)?;
-            }
-            LearnEventKind::LearningDone => {
-                if let Some(s) = self.session.take() {
-                    let (learned, rejected) = (s.trials_learned(), s.trials_rejected());
-                    self.finished = Some(s.into_gradient());
-                    self.final_counts = (learned as u32, rejected as u32);
-                }
-            }
-            _ => {}
+        let reply = learner.handle(event)?;
+        match &reply.problem {
+            // A planner that restarted: news, not a fault.
+            Some(p @ LearnProblem::SessionRestarted { .. }) => println!("agp-estimator: {p}"),
+            Some(p) => eprintln!("agp-estimator: {p}"),
+            None => {}
+        }
+        if reply.finished {
+            self.finished = learner.take_gradient();
+        }
+        if let Some(r) = reply.report {
+            self.report(r)?;
         }
         Ok(())
     }

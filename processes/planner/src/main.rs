@@ -7,7 +7,7 @@ mod task_mode;
 
 use std::time::Duration;
 
-use agp_perception::ContactSense;
+use agp_perception::{ApproachContact, ContactSense};
 use agp_planning::{PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
@@ -294,6 +294,7 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
             let frame = *driver.reset(obj, Pose2::new(x, y, heading))?;
             let start_odo = frame.odometry;
             let mut routine = PushRoutine::new(settings, frame.sim_time_s);
+            let mut approach = ApproachContact::new();
             let mut peak = 0f32;
             loop {
                 let f = *driver.frame();
@@ -315,12 +316,9 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
                     );
                     return Ok(());
                 }
-                let (l, r) = routine.update(
-                    sense.front_gap(&f.ir_raw),
-                    1.0 / sense.ir_rate_hz(),
-                    f.sim_time_s,
-                    f.ir_sample,
-                );
+                let gap = sense.front_gap(&f.ir_raw);
+                approach.observe(f.ir_sample, gap, f.odometry);
+                let (l, r) = routine.step(gap, approach.stalled(), f.sim_time_s);
                 let next = driver.step(l, r)?;
                 if let Some(s) = swap_in.take() {
                     let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];

@@ -199,7 +199,7 @@ pub fn run(
     };
     let config = EpisodeConfig {
         trace: settings.trace,
-        ..EpisodeConfig::for_scenario(scenario)
+        ..EpisodeConfig::for_task(&scenario.task)
     };
     // Steps were applied before this planner came: it takes over a world under way (the
     // oracle knows where the object is and needs no finding).

@@ -30,7 +30,7 @@ fn main() -> anyhow::Result<()> {
         None => common::learn_from_truth(&scenario, &robot),
     };
     eprintln!("AG ready in {:.1} s", t.elapsed().as_secs_f64());
-    let mut config = EpisodeConfig::for_scenario(&scenario);
+    let mut config = EpisodeConfig::for_task(&scenario.task);
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     if let Some(v) = env("SPREAD") {
         config.spread_weight = v;

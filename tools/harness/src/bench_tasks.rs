@@ -337,7 +337,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
     let mut planners = args.planners.clone();
     planners.sort();
     planners.dedup();
-    let base = EpisodeConfig::for_scenario(&scenario);
+    let base = EpisodeConfig::for_task(&scenario.task);
     let goals = place_goals(&scenario, args.episodes, seed);
 
     eprintln!(
@@ -360,18 +360,24 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
             seed,
         )?;
         let mut runs = Vec::with_capacity(goals.len());
-        for (k, goal) in goals.iter().enumerate() {
-            let config = EpisodeConfig {
-                seed: seed.wrapping_add(k as u64),
-                ..base.clone()
-            };
-            let r = runner
-                .episode(planner, &Task::Place { goal: *goal }, &config)
-                .with_context(|| format!("planner `{planner}`, episode {k}"))?;
-            runs.push(r);
-            bar.inc(1);
-        }
-        runner.finish()?;
+        let episodes = (|| -> Result<()> {
+            for (k, goal) in goals.iter().enumerate() {
+                let config = EpisodeConfig {
+                    seed: seed.wrapping_add(k as u64),
+                    ..base.clone()
+                };
+                let r = runner
+                    .episode(planner, &Task::Place { goal: *goal }, &config)
+                    .with_context(|| format!("planner `{planner}`, episode {k}"))?;
+                runs.push(r);
+                bar.inc(1);
+            }
+            Ok(())
+        })();
+        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
+        let finished = runner.finish();
+        episodes?;
+        finished?;
         results.insert(planner, runs);
     }
     bar.finish_and_clear();
@@ -510,7 +516,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
     let path = scenario.task.path.clone();
     let config = EpisodeConfig {
         seed,
-        ..EpisodeConfig::for_scenario(&scenario)
+        ..EpisodeConfig::for_task(&scenario.task)
     };
     eprintln!(
         "bench trajectory: scenario `{}`, seed {seed}; {note}",
@@ -531,8 +537,11 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
         )?;
         let r = runner
             .episode(planner, &task, &config)
-            .with_context(|| format!("planner `{planner}`"))?;
-        runner.finish()?;
+            .with_context(|| format!("planner `{planner}`"));
+        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
+        let finished = runner.finish();
+        let r = r?;
+        finished?;
         runs.push(r);
         bar.inc(1);
     }

@@ -320,7 +320,7 @@ fn watch(
     let node = instance
         .node("agp-judge", false)
         .map_err(|e| anyhow!("cannot create the judge's node: {e:?}"))?;
-    let config = EpisodeConfig::for_scenario(scenario);
+    let config = EpisodeConfig::for_task(&scenario.task);
     let mut truth = TruthRecorder::open(instance, &node, config.record_every_steps)?;
     let tasks = instance
         .task(&node)
@@ -484,8 +484,10 @@ mod tests {
         // grew about 100 kB/s on a long run).
         let steps = 2_000_000u64;
         let path = vec![DVec2::new(0.0, 0.0), DVec2::new(3.0, 0.0)];
-        let config = EpisodeConfig::for_scenario(
-            &Scenario::resolve("triangle").expect("the built-in triangle"),
+        let config = EpisodeConfig::for_task(
+            &Scenario::resolve("triangle")
+                .expect("the built-in triangle")
+                .task,
         );
         let mut log = TruthLog::new(1);
         let mut full = Vec::new();

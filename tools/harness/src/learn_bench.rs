@@ -2,10 +2,12 @@
 //! (feature `learn-bench`; `agp bench learn` is its command).
 //!
 //! The physics runs in this process: `agp_physics::Sim`, the rapier2d world as a library,
-//! not the physics process over shared memory. The estimator ([`LearningSession`]) sees only
-//! IR frames and odometry; this module plays the planner (approach, push, circling, with
-//! the planner library's routines) and the evaluation, which alone reads the simulator's
-//! ground truth.
+//! not the physics process over shared memory. The protocol is the planner's
+//! ([`LearnProtocol`], the one `agp-planner --mode learn` drives over the pipeline), run
+//! against an in-process world: the simulator, and the estimator's learner
+//! ([`ProtocolLearner`]) fed every frame and every event as the estimator process would
+//! be; it sees only IR frames and odometry. The evaluation alone reads the simulator's
+//! ground truth: the world records it as the protocol's events pass.
 //!
 //! Per object: one circling for the shape, then `trials_per_alpha` trials per alpha, one
 //! every `360 / trials_per_alpha` degrees round the object, each starting from the object
@@ -14,7 +16,7 @@
 //! the simulator did.
 
 use agp_shared_types::angle;
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::TAU;
 use std::time::Instant;
 
 use agp_affordance::{
@@ -23,16 +25,18 @@ use agp_affordance::{
 };
 use agp_physics::{Sim, SimBuildError, SimConfig};
 use agp_planning::{
-    CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, PushPhase, PushRoutine, PushSettings,
+    CircleSettings, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
+    LearnWorld, ProtocolStep, PushSettings, SHAPE_APPROACH_TIMEOUT_S,
 };
-use agp_shared_types::GRID_SIDE;
 use agp_shared_types::angle::wrap_angle;
+use agp_shared_types::{LearnEvent, LearnEventKind, LearnReport, LearnReportKind};
 use agp_world::{ObjectShape, Pose, Rng, RobotDescription, Scenario};
 use glam::DVec2;
 
 use agp_perception::{
-    ContactEstimates, ContactMethod, ContactSense, IrView, LearningConfig, LearningSession,
-    SessionBuildError, ShapeLearnError, TrialOrderError, TrialRecord, TrialStartError,
+    ApproachContact, ContactEstimates, ContactMethod, ContactSense, IrView, LearnProblem,
+    LearningConfig, ProtocolLearner, SessionBuildError, ShapeLearnError, TrialOrderError,
+    TrialRecord, TrialStartError,
 };
 
 /// The paper's largest single-push rotations for the triangle, degrees, per alpha.
@@ -52,8 +56,6 @@ pub const TARGET_POSE_ORIENTATION_DEG: f64 = 5.0;
 
 /// Longest push this bench accepts, seconds.
 const MAX_PUSH_DURATION_S: f64 = 10.0;
-/// The shape circling's approach gives up after this long, seconds.
-const SHAPE_APPROACH_TIMEOUT_S: f64 = 5.0;
 /// Stream of the evaluation's random pushes (the simulator's noise uses others).
 const EVAL_RNG_STREAM: u64 = 99;
 
@@ -75,8 +77,8 @@ pub struct LearnBenchConfig {
     pub push: PushSettings,
     /// The circling after each push (and the shape circling).
     pub circle: CircleSettings,
-    /// Robot start: on a circle this far (m) outside the object's farthest point plus the
-    /// robot's radius.
+    /// Robot start: on a circle this far (m) outside the learned border's farthest point
+    /// plus the robot's radius.
     pub start_margin_m: f64,
     /// After a push the robot backs off this long (s) at `backoff_speed` before circling.
     pub backoff_s: f64,
@@ -89,20 +91,20 @@ pub struct LearnBenchConfig {
 }
 
 impl Default for LearnBenchConfig {
+    /// The learning protocol's defaults ([`LearnProtocolSettings::default`]), seed 7,
+    /// [`MIN_EVAL_PUSHES`] unseen pushes.
     fn default() -> Self {
+        let p = LearnProtocolSettings::default();
         Self {
             seed: 7,
-            alphas_deg: vec![0.0, 15.0, -15.0],
-            trials_per_alpha: 60,
+            alphas_deg: p.alphas_deg,
+            trials_per_alpha: p.trials_per_alpha as usize,
             eval_pushes: MIN_EVAL_PUSHES,
-            push: PushSettings {
-                push_duration: 0.5,
-                ..PushSettings::default()
-            },
-            circle: CircleSettings::default(),
-            start_margin_m: 0.02,
-            backoff_s: 0.15,
-            backoff_speed: 0.08,
+            push: p.push,
+            circle: p.circle,
+            start_margin_m: p.start_margin_m,
+            backoff_s: p.backoff_s,
+            backoff_speed: p.backoff_speed,
             contact_method: ContactMethod::default(),
             approach_refines_shape: true,
         }
@@ -110,6 +112,20 @@ impl Default for LearnBenchConfig {
 }
 
 impl LearnBenchConfig {
+    /// The protocol these settings run.
+    pub fn protocol(&self) -> LearnProtocolSettings {
+        LearnProtocolSettings {
+            alphas_deg: self.alphas_deg.clone(),
+            trials_per_alpha: u32::try_from(self.trials_per_alpha).unwrap_or(u32::MAX),
+            push: self.push,
+            circle: self.circle,
+            start_margin_m: self.start_margin_m,
+            backoff_s: self.backoff_s,
+            backoff_speed: self.backoff_speed,
+            ..LearnProtocolSettings::default()
+        }
+    }
+
     /// Steps [`run_object`] reports progress in: the shape circling, every trial and every
     /// unseen push.
     pub fn progress_total(&self) -> usize {
@@ -236,6 +252,15 @@ pub enum LearnBenchError {
         /// The cause.
         source: TrialOrderError,
     },
+    /// The protocol stopped otherwise (the learner answered no report, a shape without a
+    /// border).
+    #[error("`{object}`: the learning protocol stopped: {reason}")]
+    Protocol {
+        /// The scenario's name.
+        object: String,
+        /// Why.
+        reason: String,
+    },
 }
 
 /// What [`run_object`] is doing.
@@ -347,6 +372,11 @@ pub struct ObjectReport {
     pub push_duration_s: f64,
     /// Border points of the shape circling.
     pub shape_points: usize,
+    /// The symmetry order learned from the shape circling's S (what the matcher used).
+    pub learned_symmetry_order: Option<u32>,
+    /// Radius of the border learned by the shape circling, mm: the start circle's is this
+    /// plus the robot's radius and the start margin.
+    pub learned_border_radius_mm: f64,
     /// How far the object moved during the shape circling (it should not), mm.
     pub shape_circling_moved_object_mm: f64,
     /// Trials run.
@@ -559,118 +589,195 @@ fn view(sim: &Sim) -> IrView {
     IrView::new(s.ir_sample, s.ir_raw, s.odometry)
 }
 
-/// The robot on a circle of radius `r` round the object at angle `phi` (world, from the
-/// centroid), facing the centroid turned by `alpha`.
-fn start_pose(object: Pose, r: f64, phi: f64, alpha: f64) -> Pose {
-    let c = object.position() + DVec2::from_angle(phi) * r;
-    Pose::new(c.x, c.y, wrap_angle(phi + PI + alpha))
-}
-
-/// What one push did, seen by the harness.
-struct PushRun {
-    /// The frame at which contact was inferred, if it was.
-    contact_view: Option<IrView>,
-    /// The frame at which the push ended.
-    end_view: Option<IrView>,
+/// The protocol's world in this process: the simulator, and the estimator's learner fed
+/// every frame and every event. It records the truth the evaluation needs as the events
+/// pass: where the robot first touched the object in each push, the object's pose after
+/// each trial's circling.
+struct BenchWorld {
+    name: String,
+    sim: Sim,
+    sense: ContactSense,
+    approach: ApproachContact,
+    learner: ProtocolLearner,
+    /// The true shape, for the touch and aim points.
+    shape: ObjectShape,
+    object0: Pose,
+    /// Reports not yet taken.
+    reports: Vec<LearnReport>,
+    sessions: u64,
+    /// Between a push's start and its end: the first touch is recorded.
+    watch_touch: bool,
     touch_obj: Option<DVec2>,
     aim_obj: Option<DVec2>,
+    /// The trial under way's alpha.
+    trial_alpha: f64,
+    trials: Vec<TrialOutcome>,
+    no_contact: usize,
+    circle_timeouts: usize,
+    shape_points: usize,
+    shape_circling_moved_object_mm: f64,
 }
 
-/// Runs approach and push from the current state; `on_frame` sees every frame (the
-/// estimator's feed), `on_contact` the frame of the inferred contact.
-fn run_push(
-    sim: &mut Sim,
-    sense: &ContactSense,
-    settings: PushSettings,
-    mut on_frame: impl FnMut(&IrView),
-    mut on_contact: impl FnMut(&IrView),
-) -> PushRun {
-    let shape = sim.scenario().object.shape.clone();
-    let mut routine = PushRoutine::new(settings, sim.sim_time());
-    let mut run = PushRun {
-        contact_view: None,
-        end_view: None,
-        touch_obj: None,
-        aim_obj: None,
-    };
-    loop {
-        let v = view(sim);
-        on_frame(&v);
-        let before = routine.phase();
-        let (l, r) = routine.update(
-            sense.front_gap(&v.ir_raw),
-            1.0 / sense.ir_rate_hz(),
-            sim.sim_time(),
-            v.ir_sample,
-        );
-        let after = routine.phase();
-        if matches!(before, PushPhase::Approach { .. }) && matches!(after, PushPhase::Push { .. }) {
-            run.contact_view = Some(v);
-            on_contact(&v);
-        }
-        if let PushPhase::Done { contact } = after {
-            if contact {
-                run.end_view = Some(v);
+impl BenchWorld {
+    /// The estimator's stall watch, fed the latest frame.
+    fn perceive(&mut self) {
+        let s = self.sim.sensors();
+        let gap = self.sense.front_gap(&s.ir_raw);
+        self.approach.observe(s.ir_sample, gap, s.odometry);
+    }
+
+    /// Starts watching for the first touch of a push.
+    fn watch(&mut self) {
+        self.watch_touch = true;
+        self.touch_obj = None;
+        self.aim_obj = None;
+    }
+
+    /// The bench's error for a problem of the learner that must not pass quietly.
+    fn fatal(&self, problem: LearnProblem) -> Option<LearnBenchError> {
+        let object = self.name.clone();
+        match problem {
+            LearnProblem::Shape { source, .. } => Some(LearnBenchError::Shape { object, source }),
+            LearnProblem::TrialStart { source, .. } => {
+                Some(LearnBenchError::TrialStart { object, source })
             }
-            return run;
+            LearnProblem::Order { source, .. } => {
+                Some(LearnBenchError::TrialOrder { object, source })
+            }
+            // A refused trial (no pose match, say) is counted in the report, not an error.
+            LearnProblem::TrialRejected { .. } | LearnProblem::SessionRestarted { .. } => None,
         }
-        sim.step(l, r);
-        if run.touch_obj.is_none() && sim.in_contact() {
-            let o = sim.object_pose();
-            let rp = sim.robot_pose();
+    }
+}
+
+impl LearnWorld for BenchWorld {
+    type Error = LearnBenchError;
+
+    fn frame(&self) -> LearnFrame {
+        let s = self.sim.sensors();
+        LearnFrame {
+            step: self.sim.step_count(),
+            sim_time_s: self.sim.sim_time(),
+            ir_sample: s.ir_sample,
+            ir_raw: s.ir_raw,
+            odometry: s.odometry,
+        }
+    }
+
+    fn front_gap(&self) -> Option<f64> {
+        // What the estimator perceives and publishes as the front gap.
+        self.sense.front_gap(&self.sim.sensors().ir_raw)
+    }
+
+    fn stalled(&self) -> bool {
+        // What the estimator perceives and publishes as a stalled gap.
+        self.approach.stalled()
+    }
+
+    fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), LearnBenchError> {
+        self.sim.step(left_mps, right_mps);
+        if self.watch_touch && self.touch_obj.is_none() && self.sim.in_contact() {
+            let o = self.sim.object_pose();
+            let rp = self.sim.robot_pose();
             let c = o.to_local(rp.position());
-            run.touch_obj = Some(nearest_border_point(&shape, c));
+            self.touch_obj = Some(nearest_border_point(&self.shape, c));
             let d = DVec2::from_angle(rp.theta - o.theta);
-            run.aim_obj = ray_hit(&shape, c, d);
+            self.aim_obj = ray_hit(&self.shape, c, d);
+        }
+        self.learner.observe(&view(&self.sim));
+        self.perceive();
+        Ok(())
+    }
+
+    fn reset(&mut self, object: Pose, robot: Pose) -> Result<(), LearnBenchError> {
+        self.sim.reset(object, robot);
+        // A new world, as the estimator sees it from the frame's reset count.
+        self.approach.reset();
+        self.learner.observe(&view(&self.sim));
+        self.perceive();
+        Ok(())
+    }
+
+    fn tell(&mut self, event: LearnEvent) -> Result<(), LearnBenchError> {
+        let kind = LearnEventKind::from_u32(event.kind);
+        match kind {
+            Some(LearnEventKind::TrialBegin) => {
+                self.trial_alpha = event.alpha_deg;
+                self.watch();
+            }
+            Some(LearnEventKind::ShapeEnd) => {
+                self.shape_circling_moved_object_mm =
+                    (self.sim.object_pose().position() - self.object0.position()).length() * 1e3;
+            }
+            Some(LearnEventKind::PushEnd) => {
+                self.watch_touch = false;
+                if event.flag == 0 {
+                    self.no_contact += 1;
+                }
+            }
+            _ => {}
+        }
+        let reply = self
+            .learner
+            .handle(&event)
+            .map_err(|source| LearnBenchError::Session {
+                object: self.name.clone(),
+                source,
+            })?;
+        if let Some(e) = reply.problem.and_then(|p| self.fatal(p)) {
+            return Err(e);
+        }
+        if kind == Some(LearnEventKind::TrialEnd) && reply.report.is_some() {
+            if event.flag == 0 {
+                self.circle_timeouts += 1;
+            }
+            let after = self.sim.object_pose();
+            self.trials.push(TrialOutcome {
+                alpha_deg: self.trial_alpha,
+                record: reply.record,
+                truth: PushTruth {
+                    touch_obj: self.touch_obj,
+                    aim_obj: self.aim_obj,
+                    displacement_obj: self.object0.to_local(after.position()),
+                    rotation_rad: wrap_angle(after.theta - self.object0.theta),
+                    after,
+                },
+            });
+        }
+        if let Some(r) = reply.report {
+            if r.kind == LearnReportKind::ShapeLearned as u32 {
+                self.shape_points = r.value as usize;
+            }
+            self.reports.push(r);
+        }
+        if reply.finished {
+            // Nothing to save in-process: the gradient stays in the learner.
+            self.reports.push(self.learner.learned_report(0, true));
+        }
+        Ok(())
+    }
+
+    fn wait_report(&mut self, kinds: &[LearnReportKind]) -> Result<LearnReport, LearnBenchError> {
+        let found = self
+            .reports
+            .iter()
+            .position(|r| kinds.iter().any(|&k| k as u32 == r.kind));
+        match found {
+            Some(i) => {
+                let r = self.reports[i];
+                self.reports.drain(..=i);
+                Ok(r)
+            }
+            None => Err(LearnBenchError::Protocol {
+                object: self.name.clone(),
+                reason: format!("the learner answered no {kinds:?} report"),
+            }),
         }
     }
-}
 
-/// Drives forward until the front gap is at most `gap` (or `timeout` s pass).
-fn approach_to_gap(
-    sim: &mut Sim,
-    sense: &ContactSense,
-    gap: f64,
-    speed: f64,
-    timeout: f64,
-    mut on_frame: impl FnMut(&IrView),
-) -> bool {
-    let t0 = sim.sim_time();
-    while sim.sim_time() - t0 < timeout {
-        let v = view(sim);
-        on_frame(&v);
-        if sense.front_gap(&v.ir_raw).is_some_and(|g| g <= gap) {
-            return true;
-        }
-        sim.step(speed, speed);
-    }
-    false
-}
-
-/// Runs a circling to its end; returns whether the lap closed.
-fn run_circle(
-    sim: &mut Sim,
-    robot: &RobotDescription,
-    settings: CircleSettings,
-    mut on_frame: impl FnMut(&IrView),
-) -> bool {
-    let mut routine = CircleRoutine::new(settings, robot, sim.sim_time());
-    loop {
-        let v = view(sim);
-        on_frame(&v);
-        let (l, r) = routine.update(sim.sim_time(), v.ir_sample, v.odometry, &v.ir_raw);
-        if let CirclePhase::Done { outcome, .. } = routine.phase() {
-            return outcome == CircleOutcome::Closed;
-        }
-        sim.step(l, r);
-    }
-}
-
-fn hold(sim: &mut Sim, seconds: f64, speed: f64, mut on_frame: impl FnMut(&IrView)) {
-    let t0 = sim.sim_time();
-    while sim.sim_time() - t0 < seconds {
-        on_frame(&view(sim));
-        sim.step(speed, speed);
+    fn new_session(&mut self) -> u64 {
+        self.sessions += 1;
+        self.sessions
     }
 }
 
@@ -686,7 +793,7 @@ pub fn check_object(scenario: &Scenario, cfg: &LearnBenchConfig) -> Result<(), L
 struct Setup {
     robot: RobotDescription,
     sim: Sim,
-    session: LearningSession,
+    learner: ProtocolLearner,
 }
 
 fn setup(scenario: &Scenario, cfg: &LearnBenchConfig) -> Result<Setup, LearnBenchError> {
@@ -705,12 +812,15 @@ fn setup(scenario: &Scenario, cfg: &LearnBenchConfig) -> Result<Setup, LearnBenc
         object: name.to_owned(),
         source,
     })?;
+    // The learner learns the object's symmetry and size from the shape circling; the
+    // harness checks the true size first, so an object too large fails before minutes of
+    // learning.
     let shape = &scenario.object.shape;
-    let mut config = LearningConfig::for_symmetry(shape.symmetry_order());
+    let mut config = LearningConfig::default();
     config.learner.alphas_deg = cfg.alphas_deg.clone();
     config.contact_method = cfg.contact_method;
     config.approach_refines_shape = cfg.approach_refines_shape;
-    let grid_half_extent = config.learner.cell_size_m * GRID_SIDE as f64 / 2.0;
+    let grid_half_extent = config.grid_half_extent_m();
     if shape.radius().is_nan() || shape.radius() >= grid_half_extent {
         return Err(LearnBenchError::ObjectTooLarge {
             object: name.to_owned(),
@@ -718,15 +828,15 @@ fn setup(scenario: &Scenario, cfg: &LearnBenchConfig) -> Result<Setup, LearnBenc
             max_mm: grid_half_extent * 1e3,
         });
     }
-    let session =
-        LearningSession::new(name, &robot, config).map_err(|source| LearnBenchError::Session {
+    let learner =
+        ProtocolLearner::new(name, &robot, config).map_err(|source| LearnBenchError::Session {
             object: name.to_owned(),
             source,
         })?;
     Ok(Setup {
         robot,
         sim,
-        session,
+        learner,
     })
 }
 
@@ -742,15 +852,14 @@ pub fn run_object(
 ) -> Result<ObjectReport, LearnBenchError> {
     let Setup {
         robot,
-        mut sim,
-        mut session,
+        sim,
+        learner,
     } = setup(scenario, cfg)?;
     let name = scenario.name.as_str();
-    let sense = ContactSense::new(&robot);
     let shape = scenario.object.shape.clone();
+    // The truth's symmetry, for scoring orientations; the learner learns its own.
     let order = shape.symmetry_order();
     let object0 = scenario.object.start;
-    let radius = shape.radius() + robot.body_radius + cfg.start_margin_m;
     let total = cfg.progress_total();
     let mut done = 0;
     let mut tick = |stage: LearnStage, done: &mut usize| {
@@ -761,106 +870,74 @@ pub fn run_object(
             total,
         });
     };
-
-    // (a) The shape: approach from the left, then one circling, object at its known pose.
-    let wall = Instant::now();
-    let t_start = sim.sim_time();
-    sim.reset(object0, start_pose(object0, radius, PI, 0.0));
-    session.begin_shape_circling(object0);
-    // Stop 2 mm before the circling's gap: the robot coasts about that far past the reading
-    // that ends the approach (one IR sample at 80 mm/s).
-    let reached = approach_to_gap(
-        &mut sim,
-        &sense,
-        cfg.circle.gap + 0.002,
-        0.08,
-        SHAPE_APPROACH_TIMEOUT_S,
-        |v| session.observe(v),
-    );
-    if !reached {
-        return Err(LearnBenchError::ShapeApproach {
+    let mut world = BenchWorld {
+        name: name.to_owned(),
+        sense: ContactSense::new(&robot),
+        approach: ApproachContact::new(),
+        sim,
+        learner,
+        shape: shape.clone(),
+        object0,
+        reports: Vec::new(),
+        sessions: 0,
+        watch_touch: false,
+        touch_obj: None,
+        aim_obj: None,
+        trial_alpha: f64::NAN,
+        trials: Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha),
+        no_contact: 0,
+        circle_timeouts: 0,
+        shape_points: 0,
+        shape_circling_moved_object_mm: f64::NAN,
+    };
+    // The frame of the built world, as the estimator sees it.
+    world.learner.observe(&view(&world.sim));
+    let protocol_error = |e: LearnProtocolError<LearnBenchError>| match e {
+        LearnProtocolError::World(e) => e,
+        LearnProtocolError::ShapeApproach => LearnBenchError::ShapeApproach {
             object: name.to_owned(),
-        });
-    }
-    run_circle(&mut sim, &robot, cfg.circle, |v| session.observe(v));
-    let shape_circling_moved_object_mm =
-        (sim.object_pose().position() - object0.position()).length() * 1e3;
-    let shape_points =
-        session
-            .finish_shape_circling()
-            .map_err(|source| LearnBenchError::Shape {
-                object: name.to_owned(),
-                source,
-            })?;
-    tick(LearnStage::ShapeCircling, &mut done);
+        },
+        other => LearnBenchError::Protocol {
+            object: name.to_owned(),
+            reason: other.to_string(),
+        },
+    };
 
-    // (b) The trials.
-    let mut trials = Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha);
-    let (mut no_contact, mut circle_timeouts) = (0, 0);
-    for &alpha in &cfg.alphas_deg {
-        for k in 0..cfg.trials_per_alpha {
-            let phi = TAU * k as f64 / cfg.trials_per_alpha as f64;
-            sim.reset(
-                object0,
-                start_pose(object0, radius, phi, alpha.to_radians()),
-            );
-            session
-                .begin_trial(alpha, object0)
-                .map_err(|source| LearnBenchError::TrialStart {
-                    object: name.to_owned(),
-                    source,
-                })?;
-            let mut contact_err = None;
-            let run = {
-                let s = std::cell::RefCell::new(&mut session);
-                run_push(
-                    &mut sim,
-                    &sense,
-                    cfg.push,
-                    |v| s.borrow_mut().observe(v),
-                    |v| contact_err = s.borrow_mut().infer_contact(v).err(),
-                )
-            };
-            let order_error = |source| LearnBenchError::TrialOrder {
-                object: name.to_owned(),
-                source,
-            };
-            if let Some(e) = contact_err {
-                return Err(order_error(e));
-            }
-            let Some(end) = run.end_view else {
-                session.abandon_trial();
-                no_contact += 1;
-                tick(LearnStage::Trials, &mut done);
-                continue;
-            };
-            session.end_push(&end).map_err(order_error)?;
-            hold(&mut sim, cfg.backoff_s, -cfg.backoff_speed, |v| {
-                session.observe(v)
-            });
-            if !run_circle(&mut sim, &robot, cfg.circle, |v| session.observe(v)) {
-                circle_timeouts += 1;
-            }
-            let after = sim.object_pose();
-            let truth = PushTruth {
-                touch_obj: run.touch_obj,
-                aim_obj: run.aim_obj,
-                displacement_obj: object0.to_local(after.position()),
-                rotation_rad: wrap_angle(after.theta - object0.theta),
-                after,
-            };
-            // A refused trial (no pose match, say) is counted in the report, not an error.
-            let record = session.finish_trial().ok();
-            trials.push(TrialOutcome {
-                alpha_deg: alpha,
-                record,
-                truth,
-            });
-            tick(LearnStage::Trials, &mut done);
-        }
-    }
-    let learning_sim_time_s = sim.sim_time() - t_start;
+    // (a) The shape, then (b) the trials: the planner's protocol.
+    let wall = Instant::now();
+    let t_start = world.sim.sim_time();
+    // The experimenter puts the robot near the object for the shape circling (the one
+    // input beside the object's start pose); everything after it starts from the border
+    // learned.
+    let mut settings = cfg.protocol();
+    settings.shape_start_reach_m.get_or_insert(shape.radius());
+    let mut protocol = LearnProtocol::new(settings, &robot, object0);
+    protocol
+        .run(&mut world, &mut |step| match step {
+            ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling, &mut done),
+            ProtocolStep::Trial { .. } => tick(LearnStage::Trials, &mut done),
+            ProtocolStep::Again { .. } | ProtocolStep::Learned(_) => {}
+        })
+        .map_err(protocol_error)?;
+    let radius = protocol.start_radius_m();
+    let trials = std::mem::take(&mut world.trials);
+    let (no_contact, circle_timeouts, shape_points, shape_circling_moved_object_mm) = (
+        world.no_contact,
+        world.circle_timeouts,
+        world.shape_points,
+        world.shape_circling_moved_object_mm,
+    );
+    let learning_sim_time_s = world.sim.sim_time() - t_start;
     let learning_wall_s = wall.elapsed().as_secs_f64();
+    let Some(session) = world.learner.session() else {
+        return Err(LearnBenchError::Protocol {
+            object: name.to_owned(),
+            reason: "the learner gave its session away".into(),
+        });
+    };
+    let (learned, rejected) = (session.trials_learned(), session.trials_rejected());
+    let learned_symmetry_order = session.symmetry_order();
+    let learned_border_radius_mm = session.border_radius_m().unwrap_or(f64::NAN) * 1e3;
 
     // The learned S against the true border: the matcher's (first circling) and the final
     // combined S (with the approaches' points), which is what the AG file carries.
@@ -868,12 +945,11 @@ pub fn run_object(
         &shape,
         session.matcher().map_or(&[][..], |m| m.border_points()),
     );
-    let final_shape = match agp_affordance::ShapeMatcher::new(
-        &session.gradient().combined_shape(),
-        session.config().matcher.clone(),
-    ) {
-        Ok(m) => shape_quality(&shape, m.border_points()),
-        Err(_) => ShapeQuality::default(),
+    let final_shape = match session.matcher().map(|m| {
+        agp_affordance::ShapeMatcher::new(&session.gradient().combined_shape(), m.config().clone())
+    }) {
+        Some(Ok(m)) => shape_quality(&shape, m.border_points()),
+        _ => ShapeQuality::default(),
     };
 
     // (i) Largest rotation per alpha, learned and true.
@@ -938,7 +1014,7 @@ pub fn run_object(
     // Gradients keyed by every method from the same trials, and one learned from the
     // truth (true aim points and effects): what the representation can do with them.
     let new_learner = || {
-        let mut lc = LearningConfig::for_symmetry(order).learner;
+        let mut lc = LearningConfig::default().learner;
         lc.alphas_deg = cfg.alphas_deg.clone();
         AffordanceLearner::new(name, &lc).map_err(|source| LearnBenchError::Learner {
             object: name.to_owned(),
@@ -983,7 +1059,7 @@ pub fn run_object(
     // that touches nothing (or whose contact the estimator cannot place) is tried again
     // elsewhere, up to a bound, so an object the robot cannot push ends the run.
     let wall = Instant::now();
-    let t_eval = sim.sim_time();
+    let t_eval = world.sim.sim_time();
     let mut rng = Rng::stream(cfg.seed, EVAL_RNG_STREAM);
     let mut samples: Vec<EvalPush> = Vec::with_capacity(cfg.eval_pushes);
     let max_attempts = cfg.eval_pushes.saturating_mul(4).saturating_add(20);
@@ -992,35 +1068,35 @@ pub fn run_object(
         eval_attempts += 1;
         let phi = rng.range(0.0, TAU);
         let alpha = rng.range(-15.0, 15.0);
-        sim.reset(
-            object0,
-            start_pose(object0, radius, phi, alpha.to_radians()),
-        );
+        // The protocol's approach and push, told to nobody: the learner is done.
+        world.reset(object0, protocol.start_pose(phi, alpha))?;
+        world.watch();
         let mut estimates = None;
-        let run = run_push(
-            &mut sim,
-            &sense,
-            cfg.push,
-            |_| {},
-            |v| estimates = session.contact_estimates(v, object0),
-        );
-        if run.end_view.is_none() {
+        let contact = protocol.approach_and_push(&mut world, |w| {
+            estimates = w
+                .learner
+                .session()
+                .and_then(|s| s.contact_estimates(&view(&w.sim), object0));
+            Ok(())
+        })?;
+        world.watch_touch = false;
+        if !contact {
             continue;
         }
         // Let the object come to rest.
-        hold(&mut sim, 0.1, 0.0, |_| {});
-        let after = sim.object_pose();
+        LearnProtocol::hold(&mut world, 0.1, 0.0)?;
+        let after = world.sim.object_pose();
         let Some(contact) = estimates else { continue };
         samples.push(EvalPush {
             contact,
-            true_aim: run.aim_obj,
+            true_aim: world.aim_obj,
             alpha_deg: alpha,
             displacement_obj: object0.to_local(after.position()),
             rotation_rad: wrap_angle(after.theta - object0.theta),
         });
         tick(LearnStage::Evaluation, &mut done);
     }
-    let eval_sim_time_s = sim.sim_time() - t_eval;
+    let eval_sim_time_s = world.sim.sim_time() - t_eval;
     let eval_wall_s = wall.elapsed().as_secs_f64();
     let keyed = |m: ContactMethod| move |e: &EvalPush| e.contact.get(m);
     let predictor = PushPredictor::new(&gradient, radius);
@@ -1069,11 +1145,13 @@ pub fn run_object(
         alphas_deg: cfg.alphas_deg.clone(),
         push_duration_s: cfg.push.push_duration,
         shape_points,
+        learned_symmetry_order,
+        learned_border_radius_mm,
         shape_circling_moved_object_mm,
         trials: cfg.alphas_deg.len() * cfg.trials_per_alpha,
-        learned: session.trials_learned(),
+        learned,
         no_contact,
-        rejected: session.trials_rejected().saturating_sub(no_contact),
+        rejected: rejected.saturating_sub(no_contact),
         circle_timeouts,
         max_rotation_deg,
         pose_position_mm: Spread::of(&mut pos_err),
@@ -1167,6 +1245,12 @@ pub fn format_report(r: &ObjectReport) -> String {
     line(format!(
         "alphas {:?} deg, push {:.2} s; shape circling: {} border points (object moved {:.2} mm)",
         r.alphas_deg, r.push_duration_s, r.shape_points, r.shape_circling_moved_object_mm
+    ));
+    line(format!(
+        "learned from the shape circling: symmetry order {}, border radius {:.1} mm",
+        r.learned_symmetry_order
+            .map_or("none".into(), |k| k.to_string()),
+        r.learned_border_radius_mm
     ));
     for (what, q) in [
         ("S of the first circling", &r.initial_shape),

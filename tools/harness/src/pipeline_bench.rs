@@ -78,7 +78,7 @@ impl PipelineBench {
         let node = instance
             .node("bench-judge", false)
             .map_err(|e| anyhow!("cannot create the bench's node: {e:?}"))?;
-        let every = EpisodeConfig::for_scenario(&scenario).record_every_steps;
+        let every = EpisodeConfig::for_task(&scenario.task).record_every_steps;
         let truth = TruthRecorder::open(&instance, &node, every)?;
         Ok(Self {
             instance,

@@ -33,7 +33,7 @@ fn placed(
     planner: PlannerKind,
     goals: &[Pose2],
 ) -> usize {
-    let base = EpisodeConfig::for_scenario(scenario);
+    let base = EpisodeConfig::for_task(&scenario.task);
     goals
         .iter()
         .enumerate()
@@ -98,7 +98,7 @@ fn the_baselines_centroid_pushes_bring_the_object_towards_the_goal_without_a_gra
     let goal = Pose2::new(0.3, 0.2, 1.0);
     let config = EpisodeConfig {
         max_pushes: 3,
-        ..EpisodeConfig::for_scenario(&scenario)
+        ..EpisodeConfig::for_task(&scenario.task)
     };
     // No gradient at all: the baseline does not need one.
     let r = run_episode(
@@ -128,7 +128,7 @@ fn the_baselines_centroid_pushes_bring_the_object_towards_the_goal_without_a_gra
 fn the_affordance_and_oracle_planners_refuse_to_run_without_a_gradient() {
     let scenario = Scenario::builtin("triangle").expect("built-in");
     let robot = RobotDescription::epuck();
-    let config = EpisodeConfig::for_scenario(&scenario);
+    let config = EpisodeConfig::for_task(&scenario.task);
     let task = Task::Place {
         goal: Pose2::new(0.3, 0.0, 0.0),
     };
@@ -141,7 +141,7 @@ fn the_affordance_and_oracle_planners_refuse_to_run_without_a_gradient() {
 fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does() {
     let (scenario, robot, ag) = setup("lshape");
     let path = scenario.task.path.clone();
-    let config = EpisodeConfig::for_scenario(&scenario);
+    let config = EpisodeConfig::for_task(&scenario.task);
     let task = Task::Trajectory { path: path.clone() };
     let mut errors = Vec::new();
     for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
@@ -189,7 +189,7 @@ fn an_episodes_time_limit_counts_from_its_own_start_not_from_the_worlds() {
     let config = EpisodeConfig {
         max_pushes: 1,
         max_sim_time_s: 60.0,
-        ..EpisodeConfig::for_scenario(&scenario)
+        ..EpisodeConfig::for_task(&scenario.task)
     };
     let mut sim = Sim::new(&scenario, &robot, SimConfig::default()).expect("sim");
     while sim.sim_time() < 2.0 * config.max_sim_time_s {

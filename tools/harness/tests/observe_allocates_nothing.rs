@@ -2,7 +2,7 @@
 //! (approach, contact, push with tracking, circling) against the physics, counting the
 //! allocations made inside the session's per-frame calls only.
 
-use agp_perception::{ContactSense, IrView, LearningConfig, LearningSession};
+use agp_perception::{ApproachContact, ContactSense, IrView, LearningConfig, LearningSession};
 use agp_physics::{Sim, SimConfig};
 use agp_planning::{
     CirclePhase, CircleRoutine, CircleSettings, PushPhase, PushRoutine, PushSettings,
@@ -71,16 +71,14 @@ fn observing_frames_through_a_shape_circling_and_a_trial_allocates_nothing() {
     sim.reset(object, Pose::new(0.12, 0.0, std::f64::consts::PI));
     session.begin_trial(0.0, object).expect("shape learned");
     let mut push = PushRoutine::new(PushSettings::default(), sim.sim_time());
+    let mut approach = ApproachContact::new();
     loop {
         let v = view(&sim);
         counted(&mut own, || session.observe(&v));
         let was_approaching = matches!(push.phase(), PushPhase::Approach { .. });
-        let (l, r) = push.update(
-            sense.front_gap(&v.ir_raw),
-            1.0 / sense.ir_rate_hz(),
-            sim.sim_time(),
-            v.ir_sample,
-        );
+        let gap = sense.front_gap(&v.ir_raw);
+        approach.observe(v.ir_sample, gap, v.odometry);
+        let (l, r) = push.step(gap, approach.stalled(), sim.sim_time());
         if was_approaching && matches!(push.phase(), PushPhase::Push { .. }) {
             counted(&mut own, || session.infer_contact(&v)).expect("approaching");
         }

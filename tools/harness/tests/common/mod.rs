@@ -3,7 +3,7 @@
 //! in `agp-estimator`).
 
 use agp_affordance::{AffordanceGradient, AffordanceLearner, LearnerConfig, PushOutcome};
-use agp_perception::ContactSense;
+use agp_perception::{ApproachContact, ContactSense};
 use agp_physics::{Sim, SimConfig};
 use agp_planning::{PushPhase, PushRoutine, PushSettings};
 use agp_world::{ObjectShape, Pose, RobotDescription, Scenario};
@@ -69,14 +69,12 @@ pub fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Afford
             };
             sim.reset(home, Pose::new(s.x, s.y, heading));
             let mut routine = PushRoutine::new(settings, sim.sim_time());
+            let mut approach = ApproachContact::new();
             let touched = loop {
                 let st = *sim.sensors();
-                let (left, right) = routine.update(
-                    sense.front_gap(&st.ir_raw),
-                    1.0 / sense.ir_rate_hz(),
-                    sim.sim_time(),
-                    st.ir_sample,
-                );
+                let gap = sense.front_gap(&st.ir_raw);
+                approach.observe(st.ir_sample, gap, st.odometry);
+                let (left, right) = routine.step(gap, approach.stalled(), sim.sim_time());
                 if let PushPhase::Done { contact } = routine.phase() {
                     break contact;
                 }
