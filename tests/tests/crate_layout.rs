@@ -122,3 +122,57 @@ fn the_planners_logic_does_not_depend_on_perception_nor_perception_on_the_planne
         "agp-perception depends on agp-planning"
     );
 }
+
+/// The Rust sources under `dir` (relative to the workspace), with their text.
+fn sources(dir: &str) -> Vec<(PathBuf, String)> {
+    let mut out = Vec::new();
+    let mut stack = vec![workspace_root().join(dir)];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display())) {
+            let path = entry.expect("a folder entry").path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                let text = std::fs::read_to_string(&path).expect("a source file");
+                out.push((path, text));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_estimator_and_the_planners_code_never_reads_the_objects_truth_from_the_scenario() {
+    // The object's spec (polygon, size, pose, mass, friction) is ground truth: the
+    // estimator and the planner get a `ScenarioBrief` (and the learning protocol's
+    // experimenter an `Experimenter`), never the `ObjectSpec`.
+    let forbidden = [".object.", "object.shape", "ObjectShape", "ObjectSpec"];
+    let mut found = Vec::new();
+    for dir in [
+        "processes/estimator/src",
+        "processes/planner/src",
+        "libs/perception/src",
+        "libs/planning/src",
+    ] {
+        for (path, text) in sources(dir) {
+            for (n, line) in text.lines().enumerate() {
+                if line.trim_start().starts_with("//") {
+                    continue;
+                }
+                if let Some(f) = forbidden.iter().find(|f| line.contains(**f)) {
+                    found.push(format!(
+                        "{}:{}: `{f}`: {}",
+                        path.display(),
+                        n + 1,
+                        line.trim()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "the object's truth read in:\n{}",
+        found.join("\n")
+    );
+}

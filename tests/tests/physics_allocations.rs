@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_runtime::alloc_count::WARMUP_MESSAGES;
-use agp_runtime::{Instance, LockstepDriver};
+use agp_runtime::{Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::Pose2;
 use agp_tests::{AllocCounts, alloc_counts, bin_path};
 
@@ -42,9 +42,14 @@ fn drive_and_count(tag: &str) -> AllocCounts {
     // behind.
     let mut lost_contact = None;
     {
-        let mut driver =
-            LockstepDriver::connect(&instance, "test", 0, true, Duration::from_secs(30))
-                .expect("physics answers");
+        let mut driver = LockstepDriver::connect(
+            &instance,
+            "test",
+            0,
+            TruthAccess::GroundTruth,
+            Duration::from_secs(30),
+        )
+        .expect("physics answers");
         // A push into the object, turning a little one way then the other: the contact
         // point, IR readings and odometry all change as the steps go, the contact holds.
         driver

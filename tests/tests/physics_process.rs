@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use agp_runtime::{Instance, LockstepDriver};
+use agp_runtime::{Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::{GroundTruth, IrFrame, Pose2};
 
 /// target/debug (or release) of the running test: the README's test command builds every
@@ -46,8 +46,14 @@ impl Physics {
     }
 
     fn driver(&self) -> LockstepDriver {
-        LockstepDriver::connect(&self.instance, "test", 0, true, Duration::from_secs(30))
-            .expect("physics answers")
+        LockstepDriver::connect(
+            &self.instance,
+            "test",
+            0,
+            TruthAccess::GroundTruth,
+            Duration::from_secs(30),
+        )
+        .expect("physics answers")
     }
 
     /// SIGTERM, then wait: physics must exit 0 on its own and leave no shared memory.

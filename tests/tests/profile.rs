@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use agp_runtime::{Instance, LockstepDriver};
+use agp_runtime::{Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::{Pose2, stage};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
 use serde_json::Value;
@@ -342,9 +342,14 @@ fn a_frame_carries_the_whole_timing_of_the_command_that_made_it() {
         .spawn()
         .expect("start agp-physics");
     let checked = std::panic::catch_unwind(|| {
-        let mut driver =
-            LockstepDriver::connect(&instance, "test", 0, false, Duration::from_secs(30))
-                .expect("physics answers");
+        let mut driver = LockstepDriver::connect(
+            &instance,
+            "test",
+            0,
+            TruthAccess::SensesOnly,
+            Duration::from_secs(30),
+        )
+        .expect("physics answers");
         let reset = *driver
             .reset(Pose2::new(0.0, 0.0, 0.0), Pose2::new(-0.12, 0.0, 0.0))
             .expect("reset");

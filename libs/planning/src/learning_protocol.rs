@@ -241,7 +241,7 @@ pub enum LearnProtocolError<E> {
 pub struct LearnProtocol {
     settings: LearnProtocolSettings,
     robot: RobotDescription,
-    object: Pose,
+    placement: Pose,
     /// One routine for every circling, restarted each time: its buffers are allocated once.
     circling: CircleRoutine,
     /// Radius of the trials' start circle, from the learned border (NaN before).
@@ -250,14 +250,14 @@ pub struct LearnProtocol {
 }
 
 impl LearnProtocol {
-    /// The protocol learning the object resting at `object` (its start pose, odometry
-    /// frame), seen and driven as `robot`.
-    pub fn new(settings: LearnProtocolSettings, robot: &RobotDescription, object: Pose) -> Self {
+    /// The protocol learning the object the experimenter puts back at `placement` (world
+    /// frame, which fixes the learned frame), seen and driven as `robot`.
+    pub fn new(settings: LearnProtocolSettings, robot: &RobotDescription, placement: Pose) -> Self {
         Self {
             circling: CircleRoutine::new(settings.circle, robot, 0.0),
             settings,
             robot: robot.clone(),
-            object,
+            placement,
             start_radius_m: f64::NAN,
             session: 0,
         }
@@ -284,7 +284,7 @@ impl LearnProtocol {
     /// The robot on the start circle of radius `r` at angle `phi` (rad, from the centroid),
     /// facing the centroid turned by `alpha` (rad).
     pub fn start_pose_at(&self, r: f64, phi: f64, alpha: f64) -> Pose {
-        let c = self.object.position() + DVec2::from_angle(phi) * r;
+        let c = self.placement.position() + DVec2::from_angle(phi) * r;
         Pose::new(c.x, c.y, wrap_angle(phi + PI + alpha))
     }
 
@@ -299,7 +299,7 @@ impl LearnProtocol {
             kind: kind as u32,
             session: self.session,
             total: self.settings.total_trials(),
-            object: self.object,
+            object: self.placement,
             ..LearnEvent::default()
         }
     }
@@ -382,7 +382,7 @@ impl LearnProtocol {
         let r = reach + self.robot.body_radius + self.settings.start_margin_m;
         let start = self.start_pose_at(r, PI, 0.0);
         world
-            .reset(self.object, start)
+            .reset(self.placement, start)
             .map_err(LearnProtocolError::World)?;
         Self::tell(world, self.event(LearnEventKind::ShapeBegin))
             .map_err(LearnProtocolError::World)?;
@@ -419,7 +419,7 @@ impl LearnProtocol {
         alpha_deg: f64,
         phi: f64,
     ) -> Result<TrialRun, W::Error> {
-        world.reset(self.object, self.start_pose(phi, alpha_deg))?;
+        world.reset(self.placement, self.start_pose(phi, alpha_deg))?;
         let mut ev = self.event(LearnEventKind::TrialBegin);
         ev.index = index;
         ev.alpha_deg = alpha_deg;

@@ -140,15 +140,27 @@ fn port<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> DriveError 
     }
 }
 
+/// Whether a driver subscribes to ground truth. Only the `oracle` planner (an upper bound
+/// that says so), the probe and the tests that check physics against the truth may; the
+/// estimator and every other planner see the senses only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TruthAccess {
+    /// The robot's senses only: what a planner sees.
+    SensesOnly,
+    /// The senses and the world's true state ([`LockstepDriver::truth`]).
+    GroundTruth,
+}
+
 impl LockstepDriver {
     /// Connects to the instance's physics and waits (up to `timeout`) for its first frame.
     pub fn connect(
         instance: &Instance,
         node_name: &str,
         epoch: u64,
-        ground_truth: bool,
+        access: TruthAccess,
         timeout: Duration,
     ) -> Result<Self, DriveError> {
+        let ground_truth = access == TruthAccess::GroundTruth;
         let node = instance.node(node_name, false).map_err(port("node"))?;
         let frames = instance.ir_frames(&node).map_err(port("IR frames"))?;
         let commands = instance

@@ -13,7 +13,7 @@ mod owner_only_storage;
 mod service;
 mod wait;
 
-pub use driver::{DriveError, LockstepDriver};
+pub use driver::{DriveError, LockstepDriver, TruthAccess};
 pub use instance::{
     ControlOpenError, ControlService, Instance, InstanceDirError, InstanceNameError,
     MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, Topic, instance_files_in,

@@ -19,9 +19,9 @@ pub use ir_geometry::{
 pub use rng::Rng;
 pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
 pub use scenario::{
-    ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Localization, MAX_POLYGON_VERTICES, MAX_POSE_ANGLE_DEG,
-    MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape, ObjectSpec, Pose,
-    RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind, TaskSpec,
+    ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Experimenter, Localization, MAX_POLYGON_VERTICES,
+    MAX_POSE_ANGLE_DEG, MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape,
+    ObjectSpec, Pose, RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind, TaskSpec,
 };
 
 /// 1-based line number of byte offset `offset` in `text`.

@@ -162,10 +162,9 @@ pub struct Scenario {
 }
 
 /// What the estimator and the planners may read of a scenario: its name (which AG file),
-/// the robot's start and the noise of its senses, the task, and where the experimenter
-/// puts the object back for the learning protocol. Nothing of the object's shape, size,
-/// mass or friction: the object's [`ObjectSpec`] is for physics, the judge, the probe and
-/// the `oracle` alone, and a process that holds only a brief cannot reach it.
+/// the robot's start and the noise of its senses, and the task. Nothing of the object: its
+/// [`ObjectSpec`] is for physics, the judge, the probe and the `oracle` alone, and a process
+/// that holds only a brief cannot reach it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScenarioBrief {
     pub name: String,
@@ -173,11 +172,20 @@ pub struct ScenarioBrief {
     pub source: String,
     pub robot: RobotSetup,
     pub task: TaskSpec,
-    /// Where the experimenter puts the object back before each step of the learning
-    /// protocol (world frame): the lab's marked spot, which fixes the frame the gradient is
-    /// learned in. In a task the object is wherever it is: only the estimator's estimate
-    /// says where.
-    pub learning_placement: Pose,
+}
+
+/// What the experimenter of the learning protocol (and of the scripted drive) knows: the
+/// marked spot where they put the object back before each step, which fixes the frame the
+/// gradient is learned in, and how far from it to put the robot for the first circling,
+/// before anything is learned. The reach is the object's circumscribed radius, ground
+/// truth: the protocol uses it for that one placement; every later start is set from the
+/// border learned by IR.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Experimenter {
+    /// Where the object is put back (world frame).
+    pub placement: Pose,
+    /// The object's circumscribed radius, m (ground truth; see above).
+    pub reach_m: f64,
 }
 
 impl ScenarioBrief {
@@ -195,7 +203,14 @@ impl Scenario {
             source: self.source.clone(),
             robot: self.robot.clone(),
             task: self.task.clone(),
-            learning_placement: self.object.start,
+        }
+    }
+
+    /// What the experimenter of the learning protocol knows of it.
+    pub fn experimenter(&self) -> Experimenter {
+        Experimenter {
+            placement: self.object.start,
+            reach_m: self.object.shape.radius(),
         }
     }
 }

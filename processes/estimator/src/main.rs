@@ -34,7 +34,7 @@ use agp_shared_types::{
     EstimatorLearning, GradientGrid, GridKind, IrFrame, LearnEvent, LearnEventKind, LearnReport,
     LearnReportKind, MAX_GRID_ALPHAS, ObjectEstimate, monotonic_ns, stage,
 };
-use agp_world::{RobotDescription, Scenario};
+use agp_world::{RobotDescription, ScenarioBrief};
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;
 use iceoryx2::port::notifier::Notifier;
@@ -101,7 +101,8 @@ const WAIT_SLICE: Duration = Duration::from_millis(20);
 fn run() -> Result<()> {
     let args = Args::parse();
     install_shutdown_handler();
-    let scenario = Scenario::resolve(&args.scenario)?;
+    // The brief: the name, the robot, the task; nothing of the object.
+    let scenario = ScenarioBrief::resolve(&args.scenario)?;
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
     let saved = args.results.join(format!("{}.ag", scenario.name));
@@ -235,7 +236,12 @@ fn open_err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow:
 }
 
 impl Estimator {
-    fn open(instance: &Instance, scenario: &Scenario, loading: bool, args: &Args) -> Result<Self> {
+    fn open(
+        instance: &Instance,
+        scenario: &ScenarioBrief,
+        loading: bool,
+        args: &Args,
+    ) -> Result<Self> {
         let node = instance
             .node("estimator", false)
             .map_err(open_err("the estimator node"))?;
@@ -481,7 +487,7 @@ fn save(gradient: &AffordanceGradient, path: &Path) -> Result<()> {
 /// The learner of `scenario`'s object: its symmetry order and its size are learned from
 /// the shape circling (an object too large for the gradient's grid fails there, see
 /// [`agp_perception::ShapeLearnError::TooLarge`]); the scenario gives only its name.
-fn learner(scenario: &Scenario) -> Result<ProtocolLearner> {
+fn learner(scenario: &ScenarioBrief) -> Result<ProtocolLearner> {
     let robot = RobotDescription::epuck();
     ProtocolLearner::new(&scenario.name, &robot, LearningConfig::default())
         .with_context(|| format!("cannot learn `{}`", scenario.name))

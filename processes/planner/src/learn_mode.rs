@@ -26,11 +26,11 @@ use agp_planning::{
     Disruption, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings, LearnWorld,
     ProtocolStep, TrialRun,
 };
-use agp_runtime::{DriveError, Instance, LockstepDriver};
+use agp_runtime::{DriveError, Instance, LockstepDriver, TruthAccess};
 
 use crate::ring::{EstimatorLink, EstimatorRestarted, Ring};
 use agp_shared_types::{LearnEvent, LearnReport, LearnReportKind, monotonic_ns};
-use agp_world::{Pose, RobotDescription, Scenario};
+use agp_world::{Experimenter, Pose, RobotDescription, ScenarioBrief};
 use anyhow::{Context, Result, anyhow, bail};
 
 /// How the learning phase is driven over the pipeline: the protocol's settings and the
@@ -138,7 +138,8 @@ fn shutdown(e: &anyhow::Error) -> bool {
 /// gradients learned (or on shutdown).
 pub fn run(
     instance: &Instance,
-    scenario: &Scenario,
+    scenario: &ScenarioBrief,
+    experimenter: Experimenter,
     epoch: u64,
     settings: &LearnSettings,
 ) -> Result<()> {
@@ -151,8 +152,13 @@ pub fn run(
         bail!("the learning phase cannot be hot-swapped in (epoch {epoch})");
     }
     let robot = RobotDescription::epuck();
-    let driver = match LockstepDriver::connect(instance, "planner", epoch, false, settings.timeout)
-    {
+    let driver = match LockstepDriver::connect(
+        instance,
+        "planner",
+        epoch,
+        TruthAccess::SensesOnly,
+        settings.timeout,
+    ) {
         Ok(d) => d,
         Err(DriveError::Shutdown) => return Ok(()),
         Err(e) => return Err(e).context("cannot reach physics"),
@@ -165,14 +171,14 @@ pub fn run(
         learned_timeout: settings.learned_timeout,
     };
     // Where the experimenter puts the object back, and the robot for the shape circling
-    // (near the object, as the in-process bench does): inputs of the protocol. The
-    // object's shape and symmetry are learned from the circling, the trials' start circle
-    // from the learned border.
+    // (near the object, as the in-process bench does): inputs of the protocol, the
+    // experimenter's (`Experimenter`). The object's shape and symmetry are learned from
+    // the circling, the trials' start circle from the learned border.
     let mut protocol_settings = settings.protocol.clone();
     protocol_settings
         .shape_start_reach_m
-        .get_or_insert(scenario.object.shape.radius());
-    let mut protocol = LearnProtocol::new(protocol_settings, &robot, scenario.object.start);
+        .get_or_insert(experimenter.reach_m);
+    let mut protocol = LearnProtocol::new(protocol_settings, &robot, experimenter.placement);
     match learn(&mut world, &mut protocol, scenario) {
         Err(e) if shutdown(&e) => Ok(()),
         other => other,
@@ -182,7 +188,7 @@ pub fn run(
 fn learn(
     world: &mut PipelineWorld,
     protocol: &mut LearnProtocol,
-    scenario: &Scenario,
+    scenario: &ScenarioBrief,
 ) -> Result<()> {
     let settings = protocol.settings().clone();
     let wall = std::time::Instant::now();

@@ -11,11 +11,12 @@ use agp_perception::{ApproachContact, ContactSense};
 use agp_planning::{PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
-    AgpIpc, DriveError, Instance, LockstepDriver, alloc_count, install_shutdown_handler,
+    AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess, alloc_count,
+    install_shutdown_handler,
 };
 use agp_shared_types::angle::wrap_angle;
 use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns, stage};
-use agp_world::{RobotDescription, Scenario};
+use agp_world::{Experimenter, RobotDescription, Scenario, ScenarioBrief};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 
@@ -185,7 +186,12 @@ fn main() {
 fn run() -> Result<()> {
     let args = Args::parse();
     install_shutdown_handler();
-    let scenario = Scenario::resolve(&args.scenario)?;
+    let full = Scenario::resolve(&args.scenario)?;
+    // The planner reads the brief (the name, the robot, the task), and the experimenter's
+    // knowledge for the learning protocol and the scripted drive; nothing else of the
+    // object.
+    let (scenario, experimenter) = (full.brief(), full.experimenter());
+    drop(full);
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
     match args.mode {
@@ -196,7 +202,7 @@ fn run() -> Result<()> {
                     args.clock
                 );
             }
-            script(&instance, &scenario, &args)
+            script(&instance, &scenario, experimenter, &args)
         }
         Mode::Learn => {
             if args.clock != "lockstep" {
@@ -210,7 +216,7 @@ fn run() -> Result<()> {
                 args.push_ms.unwrap_or(500),
                 TIMEOUT,
             );
-            learn_mode::run(&instance, &scenario, args.epoch, &settings)
+            learn_mode::run(&instance, &scenario, experimenter, args.epoch, &settings)
         }
         Mode::Place | Mode::Trajectory => {
             if args.clock != "lockstep" {
@@ -228,7 +234,7 @@ fn run() -> Result<()> {
                     args.push_ms.unwrap_or(500),
                     TIMEOUT,
                 );
-                learn_mode::run(&instance, &scenario, args.epoch, &settings)?;
+                learn_mode::run(&instance, &scenario, experimenter, args.epoch, &settings)?;
                 if agp_runtime::shutdown_requested() {
                     return Ok(());
                 }
@@ -256,11 +262,21 @@ fn run() -> Result<()> {
     }
 }
 
-fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
+fn script(
+    instance: &Instance,
+    scenario: &ScenarioBrief,
+    experimenter: Experimenter,
+    args: &Args,
+) -> Result<()> {
     let robot = RobotDescription::epuck();
     let sense = ContactSense::new(&robot);
-    let mut driver = match LockstepDriver::connect(instance, "planner", args.epoch, false, TIMEOUT)
-    {
+    let mut driver = match LockstepDriver::connect(
+        instance,
+        "planner",
+        args.epoch,
+        TruthAccess::SensesOnly,
+        TIMEOUT,
+    ) {
         Ok(d) => d,
         Err(DriveError::Shutdown) => return Ok(()),
         Err(e) => return Err(e).context("cannot reach physics"),
@@ -278,8 +294,8 @@ fn script(instance: &Instance, scenario: &Scenario, args: &Args) -> Result<()> {
         push_duration: push_ms as f64 * 1e-3,
         ..PushSettings::default()
     };
-    let obj = scenario.object.start;
-    let radius = scenario.object.shape.radius() + robot.body_radius + 0.03;
+    let obj = experimenter.placement;
+    let radius = experimenter.reach_m + robot.body_radius + 0.03;
     println!(
         "scripted drive: {} pushes of `{}`, {} ms each",
         args.pushes, scenario.name, push_ms

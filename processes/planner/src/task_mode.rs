@@ -22,9 +22,9 @@ use agp_affordance::AffordanceGradient;
 use agp_planning::{
     EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
 };
-use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::{LearnEvent, MAX_PATH_POINTS, ObjectEstimate, Pose2, TaskKind, stage};
-use agp_world::{Pose, RobotDescription, Scenario};
+use agp_world::{Pose, RobotDescription, ScenarioBrief};
 use anyhow::{Context, Result, anyhow, bail};
 use glam::DVec2;
 use iceoryx2::port::publisher::Publisher;
@@ -116,7 +116,7 @@ impl World for PipelineWorld {
 }
 
 /// The task of `scenario` as `--mode` names it, with `--goal` in place of the scenario's.
-pub fn task_of(scenario: &Scenario, kind: TaskKind, goal: Option<Pose2>) -> Task {
+pub fn task_of(scenario: &ScenarioBrief, kind: TaskKind, goal: Option<Pose2>) -> Task {
     match kind {
         TaskKind::Trajectory => Task::Trajectory {
             path: scenario.task.path.clone(),
@@ -133,7 +133,7 @@ pub fn task_of(scenario: &Scenario, kind: TaskKind, goal: Option<Pose2>) -> Task
 /// Runs one episode; returns when it ended (or on shutdown, with `Ok(None)`).
 pub fn run(
     instance: &Instance,
-    scenario: &Scenario,
+    scenario: &ScenarioBrief,
     settings: &TaskSettings,
 ) -> Result<Option<EpisodeResult>> {
     if let Task::Trajectory { path } = &settings.task
@@ -166,7 +166,11 @@ pub fn run(
         instance,
         "planner",
         settings.epoch,
-        settings.planner.reads_ground_truth(),
+        if settings.planner.reads_ground_truth() {
+            TruthAccess::GroundTruth
+        } else {
+            TruthAccess::SensesOnly
+        },
         settings.timeout,
     ) {
         Ok(d) => d,
@@ -390,7 +394,11 @@ struct TaskPublication {
 }
 
 /// Publishes the task on the instance's latched `task` topic: what the evaluation judges.
-fn publish_task(instance: &Instance, scenario: &Scenario, task: &Task) -> Result<TaskPublication> {
+fn publish_task(
+    instance: &Instance,
+    scenario: &ScenarioBrief,
+    task: &Task,
+) -> Result<TaskPublication> {
     let node = instance
         .node("planner-task", false)
         .map_err(|e| anyhow!("cannot create the task node: {e:?}"))?;

@@ -10,7 +10,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agp_planning::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
-use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::Pose2;
 use agp_world::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
@@ -70,7 +70,13 @@ impl PipelineBench {
             None => cmd.arg("--perceive-only"),
         };
         let estimator = Some(GuardedChild::spawn("agp-estimator", &mut cmd)?);
-        let driver = match LockstepDriver::connect(&instance, "bench", 0, false, LINK_TIMEOUT) {
+        let driver = match LockstepDriver::connect(
+            &instance,
+            "bench",
+            0,
+            TruthAccess::SensesOnly,
+            LINK_TIMEOUT,
+        ) {
             Ok(d) => d,
             Err(DriveError::Shutdown) => bail!("interrupted"),
             Err(e) => return Err(e).context("cannot reach the bench's physics"),

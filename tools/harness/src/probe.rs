@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use agp_runtime::{DriveError, Instance, LockstepDriver, install_shutdown_handler};
+use agp_runtime::{DriveError, Instance, LockstepDriver, TruthAccess, install_shutdown_handler};
 use agp_shared_types::Pose2;
 use agp_shared_types::angle::wrap_angle;
 use agp_world::{RobotDescription, Scenario};
@@ -138,7 +138,13 @@ fn drive(
     robot: &RobotDescription,
     args: &ProbeArgs,
 ) -> Result<Option<ProbeResult>> {
-    let mut driver = match LockstepDriver::connect(instance, "probe", 0, true, PHYSICS_TIMEOUT) {
+    let mut driver = match LockstepDriver::connect(
+        instance,
+        "probe",
+        0,
+        TruthAccess::GroundTruth,
+        PHYSICS_TIMEOUT,
+    ) {
         Ok(d) => d,
         Err(DriveError::Shutdown) => return Ok(None),
         Err(e) => return Err(e).context("cannot reach the probe's physics"),
