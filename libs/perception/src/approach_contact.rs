@@ -5,8 +5,7 @@
 
 use agp_world::Pose;
 
-/// IR samples over which a stalled gap is judged (5 samples = 78 ms at 64 Hz).
-pub const STALL_SAMPLES: usize = 5;
+pub use agp_shared_types::STALL_SAMPLES;
 
 /// Largest front gap (m) at which a gap that stops shrinking means contact. Beyond it the
 /// response table flattens (120 -> 104 raw from 50 to 60 mm, noise about 5 raw): a free

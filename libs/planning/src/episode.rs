@@ -1227,7 +1227,12 @@ impl<W: World> Run<'_, W> {
         loop {
             let pose = self.pose();
             let seen = self.world.perceived();
-            let (l, r) = routine.step(seen.front_gap(), seen.stalled == 1, self.world.sim_time());
+            let (l, r) = routine.step(
+                seen.front_gap(),
+                seen.stalled == 1,
+                self.world.sim_time(),
+                self.world.senses().ir_sample,
+            );
             match routine.phase() {
                 PushPhase::Push { .. } => {
                     if contact.is_none() {

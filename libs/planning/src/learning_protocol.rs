@@ -343,7 +343,12 @@ impl LearnProtocol {
         let mut routine = PushRoutine::new(self.settings.push, f.sim_time_s);
         loop {
             let before = routine.phase();
-            let (l, r) = routine.step(world.front_gap(), world.stalled(), f.sim_time_s);
+            let (l, r) = routine.step(
+                world.front_gap(),
+                world.stalled(),
+                f.sim_time_s,
+                f.ir_sample,
+            );
             let after = routine.phase();
             if matches!(before, PushPhase::Approach { .. })
                 && matches!(after, PushPhase::Push { .. })

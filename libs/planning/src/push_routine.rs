@@ -52,6 +52,9 @@ pub struct PushRoutine {
     phase: PushPhase,
     /// Simulated time at which contact was inferred.
     pub contact_time: Option<f64>,
+    /// The last IR sample seen, and how many new ones the approach has seen.
+    last_sample: Option<u64>,
+    samples: usize,
 }
 
 impl PushRoutine {
@@ -60,6 +63,8 @@ impl PushRoutine {
             settings,
             phase: PushPhase::Approach { since: now },
             contact_time: None,
+            last_sample: None,
+            samples: 0,
         }
     }
 
@@ -72,11 +77,24 @@ impl PushRoutine {
     /// shrinking while the robot drove forward (`ObjectEstimate::stalled`), and the
     /// frame's time. Contact is the estimator's to see: the routine decides only to push
     /// once the gap is under `stop_gap`, or stalled when `stall_contact` allows it.
-    pub fn step(&mut self, front_gap: Option<f64>, stalled: bool, now: f64) -> (f64, f64) {
+    pub fn step(
+        &mut self,
+        front_gap: Option<f64>,
+        stalled: bool,
+        now: f64,
+        ir_sample: u64,
+    ) -> (f64, f64) {
         match self.phase {
             PushPhase::Approach { since } => {
+                if self.last_sample != Some(ir_sample) {
+                    self.last_sample = Some(ir_sample);
+                    self.samples += 1;
+                }
+                // The estimator judges a stall over the last five IR samples: only once
+                // they all belong to this approach (not to the travel before it).
+                let judged = self.samples > agp_shared_types::STALL_SAMPLES;
                 let near = front_gap.is_some_and(|g| g <= self.settings.stop_gap)
-                    || (self.settings.stall_contact && stalled);
+                    || (self.settings.stall_contact && stalled && judged);
                 if near {
                     self.contact_time = Some(now);
                     self.phase = PushPhase::Push {
@@ -114,16 +132,24 @@ mod tests {
     fn a_gap_under_the_stop_gap_or_a_stall_starts_the_push_and_the_push_lasts_its_time() {
         let settings = PushSettings::default();
         let mut r = PushRoutine::new(settings, 0.0);
-        assert_eq!(r.step(Some(0.02), false, 0.1), (0.08, 0.08));
+        assert_eq!(r.step(Some(0.02), false, 0.1, 0), (0.08, 0.08));
         assert!(matches!(r.phase(), PushPhase::Approach { .. }));
-        assert_eq!(r.step(Some(0.002), false, 0.2), (0.1, 0.1));
+        assert_eq!(r.step(Some(0.002), false, 0.2, 1), (0.1, 0.1));
         assert!(matches!(r.phase(), PushPhase::Push { .. }));
         assert_eq!(r.contact_time, Some(0.2));
-        r.step(None, false, 0.2 + settings.push_duration);
+        r.step(None, false, 0.2 + settings.push_duration, 2);
         assert_eq!(r.phase(), PushPhase::Done { contact: true });
 
         let mut r = PushRoutine::new(settings, 0.0);
-        r.step(Some(0.02), true, 0.1);
+        // A stall judged over samples that came before the approach does not count.
+        for k in 0..6 {
+            r.step(Some(0.02), true, 0.01 * k as f64, k);
+            assert!(
+                matches!(r.phase(), PushPhase::Approach { .. }),
+                "sample {k}"
+            );
+        }
+        r.step(Some(0.02), true, 0.1, 6);
         assert!(matches!(r.phase(), PushPhase::Push { .. }));
     }
 
@@ -134,9 +160,11 @@ mod tests {
             ..PushSettings::default()
         };
         let mut r = PushRoutine::new(settings, 0.0);
-        r.step(Some(0.02), true, 0.1);
+        for k in 0..10 {
+            r.step(Some(0.02), true, 0.01 * k as f64, k);
+        }
         assert!(matches!(r.phase(), PushPhase::Approach { .. }));
-        r.step(Some(0.02), true, settings.approach_timeout + 0.1);
+        r.step(Some(0.02), true, settings.approach_timeout + 0.1, 10);
         assert_eq!(r.phase(), PushPhase::Done { contact: false });
     }
 }

@@ -334,7 +334,7 @@ fn script(
                 }
                 let gap = sense.front_gap(&f.ir_raw);
                 approach.observe(f.ir_sample, gap, f.odometry);
-                let (l, r) = routine.step(gap, approach.stalled(), f.sim_time_s);
+                let (l, r) = routine.step(gap, approach.stalled(), f.sim_time_s, f.ir_sample);
                 let next = driver.step(l, r)?;
                 if let Some(s) = swap_in.take() {
                     let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];

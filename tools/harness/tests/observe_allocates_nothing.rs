@@ -78,7 +78,7 @@ fn observing_frames_through_a_shape_circling_and_a_trial_allocates_nothing() {
         let was_approaching = matches!(push.phase(), PushPhase::Approach { .. });
         let gap = sense.front_gap(&v.ir_raw);
         approach.observe(v.ir_sample, gap, v.odometry);
-        let (l, r) = push.step(gap, approach.stalled(), sim.sim_time());
+        let (l, r) = push.step(gap, approach.stalled(), sim.sim_time(), v.ir_sample);
         if was_approaching && matches!(push.phase(), PushPhase::Push { .. }) {
             counted(&mut own, || session.infer_contact(&v)).expect("approaching");
         }

@@ -74,7 +74,8 @@ pub fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Afford
                 let st = *sim.sensors();
                 let gap = sense.front_gap(&st.ir_raw);
                 approach.observe(st.ir_sample, gap, st.odometry);
-                let (left, right) = routine.step(gap, approach.stalled(), sim.sim_time());
+                let (left, right) =
+                    routine.step(gap, approach.stalled(), sim.sim_time(), st.ir_sample);
                 if let PushPhase::Done { contact } = routine.phase() {
                     break contact;
                 }
