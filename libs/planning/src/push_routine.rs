@@ -141,15 +141,16 @@ mod tests {
         assert_eq!(r.phase(), PushPhase::Done { contact: true });
 
         let mut r = PushRoutine::new(settings, 0.0);
-        // A stall judged over samples that came before the approach does not count.
-        for k in 0..6 {
+        // A stall is judged over the last five samples' gaps (six samples): one judged
+        // over samples that came before the approach does not count.
+        for k in 0..5 {
             r.step(Some(0.02), true, 0.01 * k as f64, k);
             assert!(
                 matches!(r.phase(), PushPhase::Approach { .. }),
                 "sample {k}"
             );
         }
-        r.step(Some(0.02), true, 0.1, 6);
+        r.step(Some(0.02), true, 0.05, 5);
         assert!(matches!(r.phase(), PushPhase::Push { .. }));
     }
 
