@@ -324,6 +324,11 @@ impl ObjectTracker {
         self.front_gap
     }
 
+    /// Whether the front gap has stalled at the latest frame ([`ApproachContact`]).
+    pub fn stalled(&self) -> bool {
+        self.approach.stalled()
+    }
+
     /// The border points gathered by the current or last circling (world frame, m).
     pub fn border_points(&self) -> &[DVec2] {
         &self.points

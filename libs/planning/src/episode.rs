@@ -1039,14 +1039,22 @@ impl<W: World> Run<'_, W> {
         self.world.perceived().robot
     }
 
-    /// Tells the estimator what the planner does, at the latest frame.
-    fn tell(&mut self, kind: LearnEventKind, flag: u32) -> Result<(), WorldStepError> {
+    /// Tells the estimator what the planner does, at the latest frame: `event` numbered
+    /// and stamped with the frame's step.
+    fn tell(&mut self, event: LearnEvent) -> Result<(), WorldStepError> {
         self.event_seq += 1;
         self.world.tell(LearnEvent {
             seq: self.event_seq,
+            step: self.world.step_count(),
+            ..event
+        })
+    }
+
+    /// Tells the estimator an event of `kind` with `flag` and nothing else.
+    fn tell_kind(&mut self, kind: LearnEventKind, flag: u32) -> Result<(), WorldStepError> {
+        self.tell(LearnEvent {
             kind: kind as u32,
             flag,
-            step: self.world.step_count(),
             ..LearnEvent::default()
         })
     }
@@ -1129,7 +1137,7 @@ impl<W: World> Run<'_, W> {
     /// `self.circling.border_points()`).
     fn circle(&mut self) -> Result<bool, WorldStepError> {
         self.circling.restart(self.world.sim_time());
-        self.tell(LearnEventKind::TaskCircleBegin, 0)?;
+        self.tell_kind(LearnEventKind::TaskCircleBegin, 0)?;
         loop {
             let pose = self.pose();
             let s = self.world.senses();
@@ -1141,7 +1149,7 @@ impl<W: World> Run<'_, W> {
                     self.circling.border_points().len() >= 4 * agp_affordance::MIN_MATCH_POINTS;
                 let usable = outcome == CircleOutcome::Closed
                     || (outcome == CircleOutcome::Timeout && enough);
-                self.tell(LearnEventKind::TaskCircleEnd, u32::from(usable))?;
+                self.tell_kind(LearnEventKind::TaskCircleEnd, u32::from(usable))?;
                 // One frame for the estimator to match what it saw.
                 self.step(0.0, 0.0)?;
                 return Ok(usable);
@@ -1238,14 +1246,9 @@ impl<W: World> Run<'_, W> {
                     if contact.is_none() {
                         contact = Some(pose);
                         self.recording = true;
-                        self.world.tell(LearnEvent {
-                            seq: {
-                                self.event_seq += 1;
-                                self.event_seq
-                            },
+                        self.tell(LearnEvent {
                             kind: LearnEventKind::TaskPushBegin as u32,
                             flag: u32::from(plan.is_some()),
-                            step: self.world.step_count(),
                             contact: plan.map_or([0.0; 2], |p| p.0.to_array()),
                             alpha_deg: plan.map_or(0.0, |p| p.1),
                             scale: plan.map_or(1.0, |p| p.2),
@@ -1262,7 +1265,7 @@ impl<W: World> Run<'_, W> {
                     }
                     let front_gap = self.world.perceived().front_gap();
                     if contact.is_some() {
-                        self.tell(LearnEventKind::TaskPushEnd, 0)?;
+                        self.tell_kind(LearnEventKind::TaskPushEnd, 0)?;
                     }
                     return Ok((touched && contact.is_some()).then_some(PushDone { front_gap }));
                 }

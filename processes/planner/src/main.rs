@@ -7,7 +7,7 @@ mod task_mode;
 
 use std::time::Duration;
 
-use agp_perception::{ApproachContact, ContactSense};
+use agp_perception::{ObjectTracker, TrackerConfig};
 use agp_planning::{PlannerKind, PushPhase, PushRoutine, PushSettings};
 use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
@@ -269,7 +269,8 @@ fn script(
     args: &Args,
 ) -> Result<()> {
     let robot = RobotDescription::epuck();
-    let sense = ContactSense::new(&robot);
+    // Without an estimator the scripted drive perceives for itself, with its code.
+    let mut perception = ObjectTracker::new(&robot, TrackerConfig::default());
     let mut driver = match LockstepDriver::connect(
         instance,
         "planner",
@@ -310,7 +311,7 @@ fn script(
             let frame = *driver.reset(obj, Pose2::new(x, y, heading))?;
             let start_odo = frame.odometry;
             let mut routine = PushRoutine::new(settings, frame.sim_time_s);
-            let mut approach = ApproachContact::new();
+            perception.reset();
             let mut peak = 0f32;
             loop {
                 let f = *driver.frame();
@@ -332,9 +333,13 @@ fn script(
                     );
                     return Ok(());
                 }
-                let gap = sense.front_gap(&f.ir_raw);
-                approach.observe(f.ir_sample, gap, f.odometry);
-                let (l, r) = routine.step(gap, approach.stalled(), f.sim_time_s, f.ir_sample);
+                perception.observe(f.ir_sample, &f.ir_raw, f.odometry, f.fix, f.fix_seq);
+                let (l, r) = routine.step(
+                    perception.front_gap(),
+                    perception.stalled(),
+                    f.sim_time_s,
+                    f.ir_sample,
+                );
                 let next = driver.step(l, r)?;
                 if let Some(s) = swap_in.take() {
                     let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];

@@ -338,7 +338,7 @@ impl Ring {
             estimate: ObjectEstimate::default(),
         };
         let first = ring.frame();
-        ring.first_ack(&first)?;
+        ring.ack(&first)?;
         Ok(ring)
     }
 
@@ -356,19 +356,6 @@ impl Ring {
     pub fn send(&mut self, event: LearnEvent) -> Result<()> {
         let f = self.frame();
         self.link.send(event, &f)
-    }
-
-    /// The estimate of the latest frame, waited for (its frame may have come from the
-    /// topic's history: a planner started or swapped in beside a running pipeline).
-    fn first_ack(&mut self, f: &IrFrame) -> Result<()> {
-        self.ack(f)?;
-        if let Some(e) = self.link.newest
-            && e.step == f.step
-        {
-            // The frame came from history and its estimate with it, already taken.
-            self.estimate = e;
-        }
-        Ok(())
     }
 
     /// Sends wheel speeds (m/s) and returns the frame they make, acknowledged.

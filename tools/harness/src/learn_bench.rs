@@ -34,8 +34,8 @@ use agp_world::{ObjectShape, Pose, Rng, RobotDescription, Scenario};
 use glam::DVec2;
 
 use agp_perception::{
-    ApproachContact, ContactEstimates, ContactMethod, ContactSense, IrView, LearnProblem,
-    LearningConfig, ProtocolLearner, SessionBuildError, ShapeLearnError, TrialOrderError,
+    ContactEstimates, ContactMethod, IrView, LearnProblem, LearningConfig, ObjectTracker,
+    ProtocolLearner, SessionBuildError, ShapeLearnError, TrackerConfig, TrialOrderError,
     TrialRecord, TrialStartError,
 };
 
@@ -596,8 +596,8 @@ fn view(sim: &Sim) -> IrView {
 struct BenchWorld {
     name: String,
     sim: Sim,
-    sense: ContactSense,
-    approach: ApproachContact,
+    /// The estimator's perception: the front gap and its stall, as it publishes them.
+    perception: ObjectTracker,
     learner: ProtocolLearner,
     /// The true shape, for the touch and aim points.
     shape: ObjectShape,
@@ -619,11 +619,11 @@ struct BenchWorld {
 }
 
 impl BenchWorld {
-    /// The estimator's stall watch, fed the latest frame.
+    /// The estimator's perception, fed the latest frame.
     fn perceive(&mut self) {
         let s = self.sim.sensors();
-        let gap = self.sense.front_gap(&s.ir_raw);
-        self.approach.observe(s.ir_sample, gap, s.odometry);
+        self.perception
+            .observe(s.ir_sample, &s.ir_raw, s.odometry, s.fix, s.fix_seq);
     }
 
     /// Starts watching for the first touch of a push.
@@ -665,13 +665,11 @@ impl LearnWorld for BenchWorld {
     }
 
     fn front_gap(&self) -> Option<f64> {
-        // What the estimator perceives and publishes as the front gap.
-        self.sense.front_gap(&self.sim.sensors().ir_raw)
+        self.perception.front_gap()
     }
 
     fn stalled(&self) -> bool {
-        // What the estimator perceives and publishes as a stalled gap.
-        self.approach.stalled()
+        self.perception.stalled()
     }
 
     fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), LearnBenchError> {
@@ -692,7 +690,7 @@ impl LearnWorld for BenchWorld {
     fn reset(&mut self, object: Pose, robot: Pose) -> Result<(), LearnBenchError> {
         self.sim.reset(object, robot);
         // A new world, as the estimator sees it from the frame's reset count.
-        self.approach.reset();
+        self.perception.reset();
         self.learner.observe(&view(&self.sim));
         self.perceive();
         Ok(())
@@ -872,8 +870,7 @@ pub fn run_object(
     };
     let mut world = BenchWorld {
         name: name.to_owned(),
-        sense: ContactSense::new(&robot),
-        approach: ApproachContact::new(),
+        perception: ObjectTracker::new(&robot, TrackerConfig::default()),
         sim,
         learner,
         shape: shape.clone(),
