@@ -483,3 +483,18 @@ fn a_bad_waiting_strategy_in_the_environment_is_refused_before_anything_starts()
     );
     assert_eq!(count_instance_files(name), 0);
 }
+
+#[test]
+fn a_realtime_launch_file_whose_planner_learns_is_refused_before_anything_starts() {
+    let name = "t-bad-rt-learn";
+    // The planner's line: the `name` of its `[[process]]` entry.
+    let text = format!(
+        "instance = \"{name}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"realtime\"\n\n[[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n[[process]]\nname = \"planner\"\nexec = \"agp-planner\"\nargs = [\"--mode\", \"place\", \"--learn-if-missing\"]\nends_run = true\n"
+    );
+    assert_refused(
+        name,
+        &text,
+        Some(12),
+        "process `planner`: `--learn-if-missing` may run the learning phase, which needs the lockstep clock",
+    );
+}

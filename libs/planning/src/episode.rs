@@ -37,6 +37,7 @@ use agp_shared_types::{LearnEvent, LearnEventKind, Pose2};
 use agp_world::{Pose, RobotDescription, TaskSpec};
 use glam::DVec2;
 
+use crate::estimate_log::{EstimateLog, EstimateVerdict};
 use crate::{
     CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, Goal, PushChoiceSettings, PushPhase,
     PushPlanner, PushRoutine, PushSettings, TravelPhase, TravelRoutine, TravelSettings, World,
@@ -334,6 +335,10 @@ pub struct EpisodeResult {
     /// world offers ground truth (for the judge).
     pub samples: Vec<PoseSample>,
     pub final_truth: Option<Pose2>,
+    /// The estimator's estimate of every frame the planner acted on.
+    pub estimates: EstimateLog,
+    /// Those estimates judged against ground truth: [`EpisodeResult::judged`] makes it.
+    pub estimate_verdict: Option<EstimateVerdict>,
 }
 
 impl EpisodeResult {
@@ -344,6 +349,7 @@ impl EpisodeResult {
         if let Some(truth) = self.final_truth {
             let samples = std::mem::take(&mut self.samples);
             self.evaluation = Some(Evaluation::judge(task, truth, true_order, config, samples));
+            self.estimate_verdict = Some(self.estimates.judged(truth, true_order));
         }
         self
     }
@@ -434,7 +440,9 @@ pub fn drive_episode<W: World>(
         recording: false,
         start_s,
         event_seq: 0,
+        estimates: EstimateLog::default(),
     };
+    run.estimates.take(run.world.perceived());
     run.record();
     let mut episode = Episode {
         run,
@@ -470,6 +478,8 @@ pub fn drive_episode<W: World>(
         evaluation: None,
         samples: std::mem::take(&mut run.samples),
         final_truth,
+        estimates: run.estimates,
+        estimate_verdict: None,
     })
 }
 
@@ -1031,6 +1041,8 @@ struct Run<'a, W: World> {
     start_s: f64,
     /// Running count of the events told to the estimator.
     event_seq: u64,
+    /// The estimate of every frame the planner acted on.
+    estimates: EstimateLog,
 }
 
 impl<W: World> Run<'_, W> {
@@ -1076,6 +1088,7 @@ impl<W: World> Run<'_, W> {
 
     fn step(&mut self, left: f64, right: f64) -> Result<(), WorldStepError> {
         self.world.step(left, right)?;
+        self.estimates.take(self.world.perceived());
         if self.recording
             && self
                 .world

@@ -2,6 +2,7 @@
 
 mod circle_routine;
 mod episode;
+mod estimate_log;
 mod learning_protocol;
 mod push_choice;
 mod push_routine;
@@ -14,9 +15,10 @@ pub use episode::{
     EpisodeConfig, EpisodeEnd, EpisodeResult, EpisodeRunError, Evaluation, PlannerKind,
     PlannerParseError, PoseSample, Task, distance_to_path, drive_episode, lookahead_point,
 };
+pub use estimate_log::{EstimateLog, EstimateVerdict};
 pub use learning_protocol::{
     ALPHAS_DEG, Disruption, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
-    LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun,
+    LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun, max_object_reach_m,
 };
 pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};

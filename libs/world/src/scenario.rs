@@ -176,16 +176,13 @@ pub struct ScenarioBrief {
 
 /// What the experimenter of the learning protocol (and of the scripted drive) knows: the
 /// marked spot where they put the object back before each step, which fixes the frame the
-/// gradient is learned in, and how far from it to put the robot for the first circling,
-/// before anything is learned. The reach is the object's circumscribed radius, ground
-/// truth: the protocol uses it for that one placement; every later start is set from the
-/// border learned by IR.
+/// gradient is learned in (as the paper's experimenter does by hand). Nothing else of the
+/// object: the robot's first circling starts outside anything the gradients' grid can
+/// hold, and every later start is set from the border learned by IR.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Experimenter {
     /// Where the object is put back (world frame).
     pub placement: Pose,
-    /// The object's circumscribed radius, m (ground truth; see above).
-    pub reach_m: f64,
 }
 
 impl ScenarioBrief {
@@ -210,7 +207,6 @@ impl Scenario {
     pub fn experimenter(&self) -> Experimenter {
         Experimenter {
             placement: self.object.start,
-            reach_m: self.object.shape.radius(),
         }
     }
 }

@@ -598,6 +598,7 @@ impl Runner {
         let mut wheels = (0.0, 0.0);
         let mut last_command = Instant::now() - watchdog;
         let mut next = Instant::now();
+        let mut ticks = TickAccount::default();
         self.publish(0, TimingHeader::default())?;
         while !shutdown_requested() {
             if self.apply_resets()? {
@@ -605,6 +606,8 @@ impl Runner {
             }
             self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
             let mut cause = TimingHeader::default();
+            // The step of the newest frame a command of this tick answers.
+            let mut answered = None;
             while let Some(c) = self
                 .ports
                 .commands
@@ -624,9 +627,11 @@ impl Runner {
                     wheels = (c.left_mps, c.right_mps);
                     last_command = Instant::now();
                     cause = received(&c);
+                    answered = Some(c.step);
                 }
             }
             self.gate.name_strangers(&self.ports);
+            ticks.tick(self.sim.step_count(), answered);
             if last_command.elapsed() > watchdog {
                 // Stale commands: stop, as the robot's firmware would.
                 wheels = (0.0, 0.0);
@@ -648,7 +653,59 @@ impl Runner {
                 next = now;
             }
         }
+        println!("agp-physics: {ticks}");
         Ok(())
+    }
+}
+
+/// How the commands kept up with the realtime clock, tick by tick, from the first command
+/// of a planner on: a tick is on time when a command answering the newest frame (the one
+/// the tick before published) arrived in it, late when the newest command that arrived
+/// answers an older frame, and missing when none arrived (the wheels keep the last speeds until the
+/// watchdog stops them).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+struct TickAccount {
+    /// Ticks since the first command.
+    ticks: u64,
+    on_time: u64,
+    late: u64,
+    missing: u64,
+    /// The longest run of ticks in a row without a command.
+    longest_gap: u64,
+    gap: u64,
+}
+
+impl TickAccount {
+    /// Books the tick that steps the world from frame `step`, where `answered` is the
+    /// step of the frame the newest command received in it answers.
+    fn tick(&mut self, step: u64, answered: Option<u64>) {
+        match answered {
+            None if self.ticks == 0 => return,
+            None => {
+                self.missing += 1;
+                self.gap += 1;
+                self.longest_gap = self.longest_gap.max(self.gap);
+            }
+            Some(a) => {
+                self.gap = 0;
+                if a >= step {
+                    self.on_time += 1;
+                } else {
+                    self.late += 1;
+                }
+            }
+        }
+        self.ticks += 1;
+    }
+}
+
+impl std::fmt::Display for TickAccount {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "realtime: {} ticks since the first command: {} on time, {} late, {} missing (longest run without a command: {} ticks)",
+            self.ticks, self.on_time, self.late, self.missing, self.longest_gap
+        )
     }
 }
 
@@ -701,5 +758,30 @@ impl Drop for StepLog {
         if let Err(e) = self.flush() {
             eprintln!("agp-physics: {e:#}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tick_tests {
+    use super::TickAccount;
+
+    #[test]
+    fn ticks_before_the_first_command_are_not_booked() {
+        let mut t = TickAccount::default();
+        t.tick(0, None);
+        t.tick(1, None);
+        assert_eq!(t, TickAccount::default());
+    }
+
+    #[test]
+    fn a_command_answering_an_older_frame_is_late_and_a_tick_without_one_is_missing() {
+        let mut t = TickAccount::default();
+        t.tick(10, Some(10)); // answers the newest frame: on time
+        t.tick(11, None); // nothing came
+        t.tick(12, None);
+        t.tick(13, Some(11)); // answers a frame two ticks old
+        t.tick(14, Some(14));
+        assert_eq!((t.ticks, t.on_time, t.late, t.missing), (5, 2, 1, 2));
+        assert_eq!(t.longest_gap, 2);
     }
 }

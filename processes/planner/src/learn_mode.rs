@@ -170,15 +170,11 @@ pub fn run(
         timeout: settings.timeout,
         learned_timeout: settings.learned_timeout,
     };
-    // Where the experimenter puts the object back, and the robot for the shape circling
-    // (near the object, as the in-process bench does): inputs of the protocol, the
+    // Where the experimenter puts the object back: an input of the protocol, the
     // experimenter's (`Experimenter`). The object's shape and symmetry are learned from
     // the circling, the trials' start circle from the learned border.
-    let mut protocol_settings = settings.protocol.clone();
-    protocol_settings
-        .shape_start_reach_m
-        .get_or_insert(experimenter.reach_m);
-    let mut protocol = LearnProtocol::new(protocol_settings, &robot, experimenter.placement);
+    let mut protocol =
+        LearnProtocol::new(settings.protocol.clone(), &robot, experimenter.placement);
     match learn(&mut world, &mut protocol, scenario) {
         Err(e) if shutdown(&e) => Ok(()),
         other => other,

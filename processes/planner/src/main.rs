@@ -96,6 +96,33 @@ struct Args {
     /// active, and reports its first applied command.
     #[arg(long, env = "AGP_EPOCH", default_value_t = 0)]
     epoch: u64,
+    /// Only check that these arguments fit the clock, then exit: 0 they do, 2 they do not
+    /// (the reason on stderr). `agp up` runs it before it starts anything.
+    #[arg(long)]
+    check: bool,
+}
+
+/// Why these arguments cannot run on the pipeline's clock, if they cannot: the scripted
+/// drive and the learning phase reset the world between steps and time their pushes by
+/// steps, so they need the lockstep clock; the tasks run on either.
+fn clock_refusal(args: &Args) -> Option<String> {
+    if args.clock == "lockstep" {
+        return None;
+    }
+    if args.clock != "realtime" {
+        return Some(format!(
+            "unknown clock `{}`; expected `lockstep` or `realtime`",
+            args.clock
+        ));
+    }
+    match args.mode {
+        Mode::Script => Some("`--mode script` needs the lockstep clock".to_owned()),
+        Mode::Learn => Some("`--mode learn` (the learning phase) needs the lockstep clock".to_owned()),
+        Mode::Place | Mode::Trajectory if args.learn_if_missing => Some(
+            "`--learn-if-missing` may run the learning phase, which needs the lockstep clock: learn first (`agp up` with launch.toml, or `agp bench learn`), then run without it".to_owned(),
+        ),
+        Mode::Place | Mode::Trajectory => None,
+    }
 }
 
 /// The planner's half of a hot swap (pipeline.md, "Hot-swapping the planner").
@@ -185,6 +212,16 @@ fn main() {
 
 fn run() -> Result<()> {
     let args = Args::parse();
+    if let Some(reason) = clock_refusal(&args) {
+        if args.check {
+            eprintln!("agp-planner: {reason} (the clock is `{}`)", args.clock);
+            std::process::exit(2);
+        }
+        bail!("{reason}, not `{}`", args.clock);
+    }
+    if args.check {
+        return Ok(());
+    }
     install_shutdown_handler();
     let full = Scenario::resolve(&args.scenario)?;
     // The planner reads the brief (the name, the robot, the task), and the experimenter's
@@ -195,22 +232,8 @@ fn run() -> Result<()> {
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
     match args.mode {
-        Mode::Script => {
-            if args.clock != "lockstep" {
-                bail!(
-                    "the scripted drive needs the lockstep clock, not `{}`",
-                    args.clock
-                );
-            }
-            script(&instance, &scenario, experimenter, &args)
-        }
+        Mode::Script => script(&instance, &scenario, experimenter, &args),
         Mode::Learn => {
-            if args.clock != "lockstep" {
-                bail!(
-                    "the learning phase needs the lockstep clock, not `{}`",
-                    args.clock
-                );
-            }
             let settings = learn_mode::LearnSettings::new(
                 args.trials_per_alpha,
                 args.push_ms.unwrap_or(500),
@@ -219,9 +242,6 @@ fn run() -> Result<()> {
             learn_mode::run(&instance, &scenario, experimenter, args.epoch, &settings)
         }
         Mode::Place | Mode::Trajectory => {
-            if args.clock != "lockstep" {
-                bail!("the tasks need the lockstep clock, not `{}`", args.clock);
-            }
             let ag_file = args.results.join(format!("{}.ag", scenario.name));
             if args.learn_if_missing && args.epoch == 0 && !ag_file.exists() {
                 println!(
@@ -296,7 +316,8 @@ fn script(
         ..PushSettings::default()
     };
     let obj = experimenter.placement;
-    let radius = experimenter.reach_m + robot.body_radius + 0.03;
+    // Nothing tells how far the object reaches: start outside anything the grid holds.
+    let radius = agp_planning::max_object_reach_m() + robot.body_radius + 0.03;
     println!(
         "scripted drive: {} pushes of `{}`, {} ms each",
         args.pushes, scenario.name, push_ms
@@ -360,4 +381,43 @@ fn script(
     }
     println!("scripted drive done");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(words: &[&str]) -> Args {
+        Args::parse_from(
+            ["agp-planner", "--instance", "t"]
+                .iter()
+                .chain(words)
+                .copied(),
+        )
+    }
+
+    #[test]
+    fn the_tasks_run_on_either_clock_and_learning_needs_lockstep() {
+        for clock in ["lockstep", "realtime"] {
+            for mode in ["place", "trajectory"] {
+                assert_eq!(
+                    clock_refusal(&args(&["--clock", clock, "--mode", mode])),
+                    None,
+                    "{mode} on {clock}"
+                );
+            }
+        }
+        for words in [
+            &["--mode", "learn"][..],
+            &["--mode", "script"][..],
+            &["--mode", "place", "--learn-if-missing"][..],
+        ] {
+            let mut w = vec!["--clock", "realtime"];
+            w.extend_from_slice(words);
+            assert!(clock_refusal(&args(&w)).is_some(), "{words:?} on realtime");
+            let mut w = vec!["--clock", "lockstep"];
+            w.extend_from_slice(words);
+            assert_eq!(clock_refusal(&args(&w)), None, "{words:?} on lockstep");
+        }
+    }
 }

@@ -153,6 +153,8 @@ pub struct ProcessConfig {
     pub ends_run: bool,
     /// Delay between SIGTERM and SIGKILL when the supervisor stops this process.
     pub stop_grace: Duration,
+    /// 1-based line of its `name` in the launch file.
+    pub line: usize,
 }
 
 /// What happens when a process exits on its own.
@@ -356,6 +358,10 @@ pub enum LaunchFaultKind {
         exec: String,
         looked_at: PathBuf,
     },
+    /// An agp process refused its arguments with the launch file's clock (its own
+    /// `--check`).
+    #[error("process `{process}`: {reason}")]
+    ProcessRefused { process: String, reason: String },
     /// `restart.policy` is not a policy.
     #[error("unknown policy `{0}`; expected `never`, `on-failure` or `always`")]
     UnknownPolicy(String),
@@ -568,6 +574,60 @@ impl LaunchConfig {
             clock,
             processes,
         })
+    }
+
+    /// Asks every agp planner of the file whether its arguments run on the file's clock
+    /// (`agp-planner --check` with the context the run would give it): a task in realtime
+    /// runs, the learning phase does not. Run before anything starts; every refusal names
+    /// the process's line.
+    pub fn check_processes(&self) -> Result<(), LaunchConfigParseError> {
+        let mut faults = Vec::new();
+        for p in &self.processes {
+            if p.exec.file_stem().and_then(|s| s.to_str()) != Some("agp-planner") {
+                continue;
+            }
+            let out = std::process::Command::new(&p.exec)
+                .arg("--check")
+                .args(&p.args)
+                .envs(&p.env)
+                .envs(self.context_env(p))
+                .stdin(std::process::Stdio::null())
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .output();
+            let reason = match out {
+                Ok(o) if o.status.success() => continue,
+                Ok(o) => {
+                    let text = String::from_utf8_lossy(&o.stderr);
+                    // The first line says it (clap's usage follows it).
+                    text.lines()
+                        .map(str::trim)
+                        .find(|l| !l.is_empty())
+                        .map(|l| {
+                            l.trim_start_matches("agp-planner: ")
+                                .trim_start_matches("error: ")
+                                .to_owned()
+                        })
+                        .unwrap_or_else(|| format!("`--check` ended with {}", o.status))
+                }
+                Err(e) => format!("cannot run `{} --check`: {e}", p.exec.display()),
+            };
+            faults.push(LaunchFault {
+                line: Some(p.line),
+                kind: LaunchFaultKind::ProcessRefused {
+                    process: p.name.clone(),
+                    reason,
+                },
+            });
+        }
+        if faults.is_empty() {
+            Ok(())
+        } else {
+            Err(LaunchConfigParseError {
+                file: self.file.clone(),
+                faults,
+            })
+        }
     }
 
     /// How the processes wait for messages: each one's `AGP_WAIT` from its `env`, else
@@ -785,6 +845,7 @@ fn resolve_process(
     }
 
     ProcessConfig {
+        line: check.line_of(&p.name.span()),
         name,
         exec,
         args: args.to_vec(),

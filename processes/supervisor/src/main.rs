@@ -252,7 +252,9 @@ fn up(args: &UpArgs) -> Result<u8> {
         instance: args.instance.clone(),
         exe_dir: exe.parent().map(PathBuf::from).unwrap_or_default(),
     };
-    let config = match LaunchConfig::load(&args.launch, &options) {
+    let config = match LaunchConfig::load(&args.launch, &options)
+        .and_then(|c| c.check_processes().map(|()| c))
+    {
         Ok(c) => c,
         Err(e) => {
             for line in e.to_string().lines() {

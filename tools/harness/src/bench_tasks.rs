@@ -13,7 +13,9 @@ use std::time::Instant;
 
 use crate::{PlannerSummary, place_goals, run_episode, trajectory_error};
 use agp_affordance::AffordanceGradient;
-use agp_planning::{EpisodeConfig, EpisodeResult, Evaluation, PlannerKind, PoseSample, Task};
+use agp_planning::{
+    EpisodeConfig, EpisodeResult, EstimateVerdict, Evaluation, PlannerKind, PoseSample, Task,
+};
 use agp_shared_types::Pose2;
 use agp_world::{ObjectShape, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -107,6 +109,8 @@ struct PlaceEpisodeJson {
     circlings: u32,
     sim_time_s: f64,
     wall_time_s: f64,
+    /// The estimator's estimates of the episode, judged.
+    estimate: Option<EstimateVerdict>,
 }
 
 #[derive(Debug, Serialize)]
@@ -144,6 +148,8 @@ struct TrajectoryPlannerJson {
     circlings: u32,
     sim_time_s: f64,
     wall_time_s: f64,
+    /// The estimator's estimates of the episode, judged.
+    estimate: Option<EstimateVerdict>,
 }
 
 #[derive(Debug, Serialize)]
@@ -439,6 +445,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
                         circlings: r.circlings,
                         sim_time_s: r.sim_time_s,
                         wall_time_s: r.wall_time_s,
+                        estimate: r.estimate_verdict,
                     })
                     .collect(),
             },
@@ -592,6 +599,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
                 circlings: r.circlings,
                 sim_time_s: r.sim_time_s,
                 wall_time_s: r.wall_time_s,
+                estimate: r.estimate_verdict,
             },
         );
     }

@@ -10,9 +10,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use agp_planning::{EpisodeConfig, Evaluation, PoseSample, Task, distance_to_path};
+use agp_planning::{
+    EpisodeConfig, EstimateLog, EstimateVerdict, Evaluation, PoseSample, Task, distance_to_path,
+};
 use agp_runtime::{AgpIpc, Instance};
-use agp_shared_types::{GroundTruth, TaskKind};
+use agp_shared_types::{GroundTruth, ObjectEstimate, TaskKind};
 use agp_world::Scenario;
 use anyhow::{Result, anyhow, bail};
 use glam::DVec2;
@@ -232,6 +234,45 @@ impl TruthRecorder {
     }
 }
 
+/// [`EstimateLog`] fed from an instance's estimates: every estimate the estimator
+/// publishes during a task, for the `estimate` block of its verdict.
+pub struct EstimateRecorder {
+    subscriber: Subscriber<AgpIpc, ObjectEstimate, ()>,
+    pub log: EstimateLog,
+}
+
+impl EstimateRecorder {
+    /// Subscribes to `instance`'s estimates on `node`.
+    pub fn open(instance: &Instance, node: &Node<AgpIpc>) -> Result<Self> {
+        let subscriber = instance
+            .estimates(node)
+            .map_err(|e| anyhow!("cannot open the estimates: {e:?}"))?
+            .data
+            .subscriber_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot subscribe to the estimates: {e:?}"))?;
+        Ok(Self {
+            subscriber,
+            log: EstimateLog::default(),
+        })
+    }
+
+    /// Takes everything that arrived; into the log when `counting`, else drops it.
+    pub fn drain(&mut self, counting: bool) {
+        while let Ok(Some(e)) = self.subscriber.receive() {
+            if counting {
+                self.log.take(&e);
+            }
+        }
+    }
+
+    /// Drops what arrived and forgets what was logged: the task starts now.
+    pub fn restart(&mut self) {
+        self.drain(false);
+        self.log = EstimateLog::default();
+    }
+}
+
 /// The task as the planner published it, in the planner library's terms.
 pub fn task_of(msg: &agp_shared_types::Task) -> Option<Task> {
     match msg.kind {
@@ -260,6 +301,9 @@ pub struct RunVerdict {
     pub recorded: u64,
     /// Trajectory: the mean distance of every recorded pose to the path, m.
     pub mean_path_distance_m: Option<f64>,
+    /// The estimator's estimates published during the task, judged against the final true
+    /// pose.
+    pub estimate: EstimateVerdict,
 }
 
 /// Watches a run's ground truth and task from a thread of its own.
@@ -329,15 +373,18 @@ fn watch(
         .subscriber_builder()
         .create()
         .map_err(|e| anyhow!("cannot subscribe to the task: {e:?}"))?;
+    let mut estimates = EstimateRecorder::open(instance, &node)?;
     let _ = listening.send(());
     let mut task = None;
     while !stop.load(Ordering::Relaxed) {
         truth.drain()?;
+        estimates.drain(task.is_some());
         while let Ok(Some(t)) = tasks.receive() {
             if task.is_none() {
                 // Recording starts with the task: what came before (learning) is no part
                 // of it.
                 truth.restart()?;
+                estimates.restart();
             }
             task = task_of(&t);
             truth.follow_path(match &task {
@@ -353,6 +400,7 @@ fn watch(
     let Some(task) = task else {
         return Ok(None);
     };
+    estimates.drain(true);
     truth.follow_path(match &task {
         Task::Trajectory { path } => Some(path),
         Task::Place { .. } => None,
@@ -360,10 +408,11 @@ fn watch(
     let Some(last) = truth.finish()? else {
         return Ok(None);
     };
+    let order = scenario.object.shape.symmetry_order();
     let evaluation = Evaluation::judge(
         &task,
         last.object,
-        scenario.object.shape.symmetry_order(),
+        order,
         &config,
         std::mem::take(&mut truth.samples),
     );
@@ -373,6 +422,7 @@ fn watch(
         gaps: truth.gaps,
         recorded: truth.recorded(),
         mean_path_distance_m: truth.mean_path_distance(),
+        estimate: estimates.log.judged(last.object, order),
     }))
 }
 
@@ -436,6 +486,7 @@ pub fn report(
         "mean_error_mm": trajectory_error_mm,
         "recorded_positions": verdict.recorded,
         "ground_truth_gaps": verdict.gaps,
+        "estimate": verdict.estimate,
     });
     std::fs::write(&json_path, format!("{doc:#}\n"))
         .map_err(|err| anyhow!("cannot write {}: {err}", json_path.display()))?;

@@ -903,12 +903,9 @@ pub fn run_object(
     // (a) The shape, then (b) the trials: the planner's protocol.
     let wall = Instant::now();
     let t_start = world.sim.sim_time();
-    // The experimenter puts the robot near the object for the shape circling (the one
-    // input beside the object's start pose); everything after it starts from the border
-    // learned.
-    let mut settings = cfg.protocol();
-    settings.shape_start_reach_m.get_or_insert(shape.radius());
-    let mut protocol = LearnProtocol::new(settings, &robot, object0);
+    // The shape circling starts outside anything the grid can hold; everything after it
+    // starts from the border learned.
+    let mut protocol = LearnProtocol::new(cfg.protocol(), &robot, object0);
     protocol
         .run(&mut world, &mut |step| match step {
             ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling, &mut done),

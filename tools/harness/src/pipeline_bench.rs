@@ -16,7 +16,7 @@ use agp_world::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
 use iceoryx2::prelude::Node;
 
-use crate::evaluation::TruthRecorder;
+use crate::evaluation::{EstimateRecorder, TruthRecorder};
 use agp_runtime::children::{GuardedChild, sibling_executable};
 
 /// Safety net of the waits on the pipeline's processes (never the check itself).
@@ -34,6 +34,7 @@ pub struct PipelineBench {
     /// The experimenter's hand: resets only, never a motor command.
     driver: LockstepDriver,
     truth: TruthRecorder,
+    estimates: EstimateRecorder,
     _node: Node<AgpIpc>,
     logs: tempfile::TempDir,
     episodes: u32,
@@ -86,6 +87,7 @@ impl PipelineBench {
             .map_err(|e| anyhow!("cannot create the bench's node: {e:?}"))?;
         let every = EpisodeConfig::for_task(&scenario.task).record_every_steps;
         let truth = TruthRecorder::open(&instance, &node, every)?;
+        let estimates = EstimateRecorder::open(&instance, &node)?;
         Ok(Self {
             instance,
             scenario_arg: scenario_arg.to_owned(),
@@ -94,6 +96,7 @@ impl PipelineBench {
             estimator,
             driver,
             truth,
+            estimates,
             _node: node,
             logs,
             episodes: 0,
@@ -119,6 +122,7 @@ impl PipelineBench {
         }
         // The episode starts from the reset: only its samples count.
         self.truth.restart()?;
+        self.estimates.restart();
 
         let report = self
             .logs
@@ -157,6 +161,7 @@ impl PipelineBench {
         let mut child = GuardedChild::spawn("agp-planner", &mut cmd)?;
         let status = loop {
             self.truth.drain()?;
+            self.estimates.drain(true);
             if let Some(status) = child.try_wait()? {
                 break status;
             }
@@ -184,10 +189,12 @@ impl PipelineBench {
             .finish()?
             .ok_or_else(|| anyhow!("no ground truth arrived during the episode"))?;
         self.truth_gaps += self.truth.gaps;
+        self.estimates.drain(true);
+        let order = self.scenario.object.shape.symmetry_order();
         let evaluation = Evaluation::judge(
             task,
             truth.object,
-            self.scenario.object.shape.symmetry_order(),
+            order,
             config,
             std::mem::take(&mut self.truth.samples),
         );
@@ -202,6 +209,8 @@ impl PipelineBench {
             evaluation: Some(evaluation),
             samples: Vec::new(),
             final_truth: Some(truth.object),
+            estimates: self.estimates.log,
+            estimate_verdict: Some(self.estimates.log.judged(truth.object, order)),
         })
     }
 
