@@ -5,6 +5,8 @@
 //! than that. The service itself and its client are `agp_runtime`'s.
 
 use iceoryx2_bb_derive_macros::ZeroCopySend;
+
+use crate::{Goal, Pose2};
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Most processes a status reply lists.
@@ -47,6 +49,12 @@ pub enum ControlKind {
     Pause = 6,
     /// Release the pause lease held by `pid`: the processes run again.
     Resume = 7,
+    /// Queue `goal` (its id is set by the supervisor) for the session's serving planner
+    /// (`agp goal`).
+    Goal = 8,
+    /// From the serving planner: goal `goal.id` ended, as `name` says (`done`, `lost`, ...);
+    /// the supervisor judges it by ground truth before it answers.
+    GoalDone = 9,
 }
 
 impl ControlKind {
@@ -59,6 +67,8 @@ impl ControlKind {
             Self::Driving,
             Self::Pause,
             Self::Resume,
+            Self::Goal,
+            Self::GoalDone,
         ]
         .into_iter()
         .find(|k| *k as u32 == v)
@@ -66,9 +76,9 @@ impl ControlKind {
 }
 
 /// A request to the supervisor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ControlRequest.v1")]
+#[type_name("agp::ControlRequest.v2")]
 pub struct ControlRequest {
     /// A [`ControlKind`] as u32.
     pub kind: u32,
@@ -90,6 +100,9 @@ pub struct ControlRequest {
     /// 0 keeps the launch file's arguments; otherwise the number of arguments + 1.
     pub args_set: u32,
     pub _pad2: u32,
+    /// [`ControlKind::Goal`]: the goal to queue; [`ControlKind::GoalDone`]: the goal that
+    /// ended (its id).
+    pub goal: Goal,
 }
 
 impl Default for ControlRequest {
@@ -104,6 +117,7 @@ impl Default for ControlRequest {
             args: [0; SWAP_ARGS_LEN],
             args_set: 0,
             _pad2: 0,
+            goal: Goal::default(),
         }
     }
 }
@@ -237,10 +251,93 @@ impl Default for StrangerStatus {
     }
 }
 
-/// The supervisor's answer.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+/// Most goals a status reply lists: the latest ones.
+pub const MAX_STATUS_GOALS: usize = 16;
+
+/// Where a goal of a live session stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum GoalState {
+    /// Waiting for the goals queued before it.
+    Queued = 0,
+    /// The serving planner pursues it.
+    Pursued = 1,
+    /// Ended and judged.
+    Done = 2,
+}
+
+impl GoalState {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        [Self::Queued, Self::Pursued, Self::Done]
+            .into_iter()
+            .find(|k| *k as u32 == v)
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Queued => "queued",
+            Self::Pursued => "pursued",
+            Self::Done => "done",
+        }
+    }
+}
+
+/// One goal of a live session in a status reply. Errors are NaN until it is judged.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ControlResponse.v4")]
+#[type_name("agp::GoalStatus.v1")]
+pub struct GoalStatus {
+    pub id: u64,
+    /// A [`GoalState`] as u32.
+    pub state: u32,
+    /// A [`crate::TaskKind`] as u32.
+    pub kind: u32,
+    /// Place: the goal pose; trajectory: the path's end (theta 0).
+    pub target: Pose2,
+    /// Points of a trajectory's path (0 for a placement).
+    pub path_len: u32,
+    /// 1 if the judge says the goal was reached (place: within the tolerance; trajectory:
+    /// the path's end reached).
+    pub success: u32,
+    /// The judge's final errors: place, from the goal (mm, deg); trajectory, from the
+    /// path's end (mm) and the mean distance to the path (mm, in `mean_path_error_mm`).
+    pub position_error_mm: f64,
+    pub orientation_error_deg: f64,
+    pub mean_path_error_mm: f64,
+    /// The last estimate against the final true pose (mm, deg; NaN: none valid).
+    pub estimate_position_error_mm: f64,
+    pub estimate_orientation_error_deg: f64,
+    /// Simulated seconds from its start to its end (NaN until done).
+    pub sim_time_s: f64,
+    /// How the planner says it ended (`done`, `lost`, `max_pushes`, ...; UTF-8,
+    /// zero-padded; empty until done).
+    pub end: [u8; STATUS_TOPIC_LEN],
+}
+
+impl Default for GoalStatus {
+    fn default() -> Self {
+        Self {
+            id: 0,
+            state: 0,
+            kind: 0,
+            target: Pose2::default(),
+            path_len: 0,
+            success: 0,
+            position_error_mm: f64::NAN,
+            orientation_error_deg: f64::NAN,
+            mean_path_error_mm: f64::NAN,
+            estimate_position_error_mm: f64::NAN,
+            estimate_orientation_error_deg: f64::NAN,
+            sim_time_s: f64::NAN,
+            end: [0; STATUS_TOPIC_LEN],
+        }
+    }
+}
+
+/// The supervisor's answer.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::ControlResponse.v5")]
 pub struct ControlResponse {
     /// The [`ControlKind`] answered.
     pub kind: u32,
@@ -269,6 +366,13 @@ pub struct ControlResponse {
     pub pause_left_ms: u64,
     /// [`ControlKind::Status`]: the strangers on the instance.
     pub strangers: [StrangerStatus; MAX_STATUS_STRANGERS],
+    /// [`ControlKind::Goal`]: the id of the goal queued.
+    pub goal_id: u64,
+    /// Goals queued to this session so far; the latest `goal_count` of them are in
+    /// `goals`, oldest first.
+    pub goals_total: u32,
+    pub goal_count: u32,
+    pub goals: [GoalStatus; MAX_STATUS_GOALS],
 }
 
 impl Default for ControlResponse {
@@ -288,12 +392,20 @@ impl Default for ControlResponse {
             stranger_count: 0,
             pause_left_ms: 0,
             strangers: [StrangerStatus::default(); MAX_STATUS_STRANGERS],
+            goal_id: 0,
+            goals_total: 0,
+            goal_count: 0,
+            goals: [GoalStatus::default(); MAX_STATUS_GOALS],
         }
     }
 }
 
 const _: () = {
-    assert!(core::mem::size_of::<ControlRequest>() == 24 + 32 + 256 + 1024 + 8);
+    assert!(
+        core::mem::size_of::<ControlRequest>()
+            == 24 + 32 + 256 + 1024 + 8 + core::mem::size_of::<Goal>()
+    );
+    assert!(core::mem::size_of::<GoalStatus>() == 16 + 24 + 8 + 48 + STATUS_TOPIC_LEN);
     assert!(core::mem::size_of::<ActiveEpoch>() == 16);
     assert!(core::mem::size_of::<ProcessStatus>() == 344);
     assert!(core::mem::align_of::<ProcessStatus>() == 8);
@@ -307,6 +419,8 @@ const _: () = {
                 + 344 * MAX_STATUS_PROCESSES
                 + 16
                 + (8 + STATUS_NODE_NAME_LEN) * MAX_STATUS_STRANGERS
+                + 16
+                + core::mem::size_of::<GoalStatus>() * MAX_STATUS_GOALS
     );
 };
 

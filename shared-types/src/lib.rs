@@ -21,9 +21,9 @@ mod payloads;
 mod service_names;
 
 pub use control::{
-    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, MAX_PAUSE_LEASE,
-    MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState, ProcessStatus, STATUS_NODE_NAME_LEN,
-    SWAP_ARGS_LEN, StrangerStatus, read_str, write_str,
+    ActiveEpoch, ControlKind, ControlRequest, ControlResponse, GoalState, GoalStatus,
+    MAX_PAUSE_LEASE, MAX_STATUS_GOALS, MAX_STATUS_PROCESSES, MAX_STATUS_STRANGERS, ProcessState,
+    ProcessStatus, STATUS_NODE_NAME_LEN, SWAP_ARGS_LEN, StrangerStatus, read_str, write_str,
 };
 pub use payloads::*;
 pub use service_names::ServiceNames;

@@ -423,8 +423,40 @@ pub struct Task {
     pub seed: u64,
 }
 
+/// A goal of a live session: the supervisor queues the goals `agp goal` sends and
+/// publishes the one to pursue on the latched `goal` topic; the serving planner pursues
+/// the latest one it has not ended. Id 0: no goal.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::Goal.v1")]
+pub struct Goal {
+    /// 1, 2, ... in the order they were queued; 0: none.
+    pub id: u64,
+    pub task: Task,
+}
+
+impl Default for Goal {
+    fn default() -> Self {
+        Self {
+            id: 0,
+            task: Task {
+                kind: TaskKind::Place as u32,
+                path_len: 0,
+                goal: Pose2::default(),
+                tolerance_m: 0.0,
+                tolerance_rad: 0.0,
+                path: [[0.0; 2]; MAX_PATH_POINTS],
+                max_pushes: 0,
+                _pad: 0,
+                seed: 0,
+            },
+        }
+    }
+}
+
 const _: () = {
     use core::mem::{align_of, size_of};
+    assert!(size_of::<Goal>() == 8 + size_of::<Task>() && align_of::<Goal>() == 8);
     assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
     assert!(size_of::<IrFrame>() == 72 * 2 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);

@@ -15,6 +15,8 @@ impl ServiceNames {
     pub const ESTIMATES: &'static str = "agp/estimates";
     pub const GRIDS: &'static str = "agp/grids";
     pub const TASK: &'static str = "agp/task";
+    /// The goal of a live session the serving planner pursues (the supervisor publishes).
+    pub const GOAL: &'static str = "agp/goal";
     pub const ACTIVE_EPOCH: &'static str = "agp/active_epoch";
     /// The event service physics blocks on: notified after a motor command or a reset.
     pub const PHYSICS_INBOX: &'static str = "agp/physics_inbox.ev";

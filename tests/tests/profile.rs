@@ -310,6 +310,59 @@ fn profile_of_a_placement_reports_the_hops_through_the_estimator_and_leaves_no_f
 }
 
 #[test]
+fn an_instance_that_goes_down_while_profiled_ends_the_profile_in_one_line_and_keeps_what_was_sampled()
+ {
+    let name = "t-profile-ends";
+    let dir = LaunchDir::new(&launch(name));
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines("scripted drive:", 1, TIMEOUT);
+    let json = dir.path().join("ended.json");
+    let profiler = Command::new(bin_path("agp"))
+        .args(["profile", "--instance", name, "--seconds", "600", "--json"])
+        .arg(&json)
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start agp profile");
+    // Down once the profiler samples (its node is on the instance), not after a delay.
+    let instance = Instance::new(name).expect("name");
+    let profiling = || {
+        let mut found = false;
+        let _ = iceoryx2::prelude::Node::<agp_runtime::AgpIpc>::list(instance.config(), |state| {
+            if let iceoryx2::node::NodeState::Alive(view) = &state {
+                use iceoryx2::node::NodeView;
+                found |= view
+                    .details()
+                    .as_ref()
+                    .is_some_and(|d| d.name().as_str().starts_with("agp-profile-"));
+            }
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        found
+    };
+    up.until("the profiler samples", TIMEOUT, profiling);
+    let down = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    assert!(down.status.success(), "{}", down.stderr);
+    let out = profiler.wait_with_output().expect("agp profile ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 1, "one line, no iceoryx2 dump: {stderr}");
+    assert!(
+        lines[0].starts_with(&format!("agp: error: instance `{name}` went down ")),
+        "{stderr}"
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("the JSON is written"))
+            .expect("JSON");
+    assert_eq!(report["sampling"]["instance_went_down"], true, "{report}");
+    assert!(report["samples"].as_u64() > Some(0), "{report}");
+    let _ = up.wait(TIMEOUT);
+    assert_eq!(count_instance_files(name), 0);
+}
+
+#[test]
 fn profile_refuses_an_instance_that_is_not_up() {
     let name = "t-profile-none";
     let dir = LaunchDir::new(&launch(name));

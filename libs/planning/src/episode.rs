@@ -33,7 +33,7 @@ use agp_shared_types::angle;
 use std::time::Instant;
 
 use agp_affordance::{AffordanceGradient, Prediction, learned_border_radius_m, symmetry_order_of};
-use agp_shared_types::{LearnEvent, LearnEventKind, Pose2};
+use agp_shared_types::{LearnEvent, LearnEventKind, ObjectEstimate, Pose2};
 use agp_world::{Pose, RobotDescription, TaskSpec};
 use glam::DVec2;
 
@@ -113,6 +113,28 @@ pub enum Task {
     Trajectory { path: Vec<DVec2> },
 }
 
+impl Task {
+    /// The task a `Task` message carries (the planner's, the judge's, a live session's
+    /// goal); `None` for an unknown kind.
+    pub fn from_message(msg: &agp_shared_types::Task) -> Option<Self> {
+        match msg.kind {
+            k if k == agp_shared_types::TaskKind::Place as u32 => {
+                Some(Self::Place { goal: msg.goal })
+            }
+            k if k == agp_shared_types::TaskKind::Trajectory as u32 => {
+                let n = (msg.path_len as usize).min(msg.path.len());
+                Some(Self::Trajectory {
+                    path: msg.path[..n]
+                        .iter()
+                        .map(|p| DVec2::from_array(*p))
+                        .collect(),
+                })
+            }
+            _ => None,
+        }
+    }
+}
+
 /// How an episode runs. [`EpisodeConfig::for_task`] gives the defaults.
 #[derive(Debug, Clone)]
 pub struct EpisodeConfig {
@@ -184,6 +206,11 @@ pub struct EpisodeConfig {
     pub stop_margin_relax: f64,
     /// Print each estimate and push on stderr (development aid).
     pub trace: bool,
+    /// The world is under way (a planner swapped in, a later goal of a live session): the
+    /// first circling starts from the object's pose the estimator holds, if it holds one,
+    /// instead of straight ahead. Off for a fresh world, where the robot starts facing the
+    /// object and what the estimator held may be of a world gone.
+    pub start_from_estimate: bool,
 }
 
 impl EpisodeConfig {
@@ -224,6 +251,7 @@ impl EpisodeConfig {
             stop_margin: 0.7,
             stop_margin_relax: 0.02,
             trace: false,
+            start_from_estimate: false,
         }
     }
 }
@@ -412,13 +440,7 @@ pub fn drive_episode<W: World>(
                 ..PushChoiceSettings::new(order, r)
             };
             let push_planner = PushPlanner::new(ag, choice);
-            let long_planner = PushPlanner::new(
-                ag,
-                PushChoiceSettings {
-                    push_fractions: vec![1.0],
-                    ..push_planner.settings().clone()
-                },
-            );
+            let long_planner = push_planner.with_push_fractions(vec![1.0]);
             (
                 Brain::Gradient {
                     planner: push_planner,
@@ -568,6 +590,11 @@ struct Episode<'a, W: World> {
 /// far off after a push.
 const STEER_LEVER_M: f64 = 0.05;
 
+/// The object's pose as the estimator holds it, if it holds one it can bound.
+fn perceived_pose(e: &ObjectEstimate) -> Option<Pose2> {
+    (e.valid == 1 && e.sigma_xy.is_finite()).then_some(e.pose)
+}
+
 /// Consecutive circlings that may fail before the object counts as lost.
 const MAX_FAILED_ESTIMATES: u32 = 3;
 
@@ -575,11 +602,18 @@ impl<W: World> Episode<'_, W> {
     fn run(&mut self) -> Result<EpisodeEnd, WorldStepError> {
         let config = self.run.config;
         let oracle = self.planner.reads_ground_truth();
-        // findObj + EstimateOrientationObj: the robot starts facing the object.
+        // findObj + EstimateOrientationObj: the robot starts facing the object, or, in a
+        // world under way (a planner swapped in, a later goal of a live session), the
+        // estimator still holds the object's pose: the first circling starts from there.
         let mut est = if oracle {
             Estimate::fresh(self.oracle_truth()?)
         } else {
-            match self.estimate(None)? {
+            let guess = if config.start_from_estimate {
+                perceived_pose(self.run.world.perceived())
+            } else {
+                None
+            };
+            match self.estimate(guess)? {
                 Some(e) => e,
                 None => return Ok(EpisodeEnd::Lost),
             }

@@ -338,6 +338,22 @@ impl LockstepDriver {
         }
     }
 
+    /// Waits (up to the driver's timeout) for a frame newer than the latest and returns
+    /// the newest there is; with a command or reset under way, the frame it makes, as
+    /// [`LockstepDriver::await_frame`]. For a realtime physics, which publishes frames
+    /// whether commanded or not: a client that needs a later frame than the one it holds
+    /// (its estimate is not in, or predates what it told the estimator) takes it without
+    /// commanding. A lockstep physics publishes none uncommanded: this would time out.
+    pub fn await_newer_frame(&mut self) -> Result<&IrFrame, DriveError> {
+        if self.awaited.is_none() {
+            self.awaited = Some(Awaited::After {
+                step: self.frame.step,
+                reset_seq: self.frame.reset_seq,
+            });
+        }
+        self.await_frame()
+    }
+
     /// Makes a polled frame the latest: the awaited one (`Ok`), with its step's ground
     /// truth, or the first of a restarted physics (`Err`).
     fn accept(&mut self, found: Result<IrFrame, IrFrame>) -> Result<&IrFrame, DriveError> {

@@ -11,7 +11,7 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use agp_shared_types::{
-    ActiveEpoch, ControlRequest, ControlResponse, GRIDS_PER_ALPHA, GradientGrid, GroundTruth,
+    ActiveEpoch, ControlRequest, ControlResponse, GRIDS_PER_ALPHA, Goal, GradientGrid, GroundTruth,
     IrFrame, LearnEvent, LearnReport, MAX_GRID_ALPHAS, MotorCommand, ObjectEstimate, Reset,
     ServiceNames, Task,
 };
@@ -363,6 +363,16 @@ impl Instance {
             ServiceNames::GRIDS,
             &ServiceNames::event_of(ServiceNames::GRIDS),
             Qos::grids(),
+        )
+    }
+
+    /// The goal of a live session (the supervisor publishes it; latched).
+    pub fn goal(&self, node: &Node<AgpIpc>) -> Result<Topic<Goal>, OpenError> {
+        Topic::open(
+            node,
+            ServiceNames::GOAL,
+            &ServiceNames::event_of(ServiceNames::GOAL),
+            Qos::latched(),
         )
     }
 

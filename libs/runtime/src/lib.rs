@@ -14,6 +14,15 @@ mod service;
 mod wait;
 
 pub use driver::{DriveError, LockstepDriver, TruthAccess};
+
+/// Keeps iceoryx2's own log off the terminal: its warnings come as Debug dumps of its
+/// internals (a profiler that outlives its instance printed screens of them), while every
+/// failure that matters reaches the caller as an error, which agp reports in one line.
+/// `IOX2_LOG_LEVEL` (`trace` ... `fatal`) turns them back on for debugging. Every agp
+/// binary calls it first thing.
+pub fn quiet_iceoryx2() {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Fatal);
+}
 pub use instance::{
     ControlOpenError, ControlService, Instance, InstanceDirError, InstanceNameError,
     MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, Topic, instance_files_in,

@@ -1,24 +1,21 @@
-//! The iceoryx2 service type every agp process uses: iceoryx2's `ipc::Service` with two parts
-//! changed, both measured on the 2-core machine the pipeline was built on.
+//! The iceoryx2 service type every agp process uses: iceoryx2's `ipc::Service` with one part
+//! changed, measured on the 2-core machine the pipeline was built on.
 //!
-//! - **Events wake through a futex** (`SemaphoreShmCountingBitSet`, a process-shared POSIX
-//!   semaphore in shared memory) instead of a Unix datagram socket: a blocked listener woke
-//!   9.4 us after the notification (p50, one way) where the socket took 14 us, and a
-//!   notification no one waits for costs an atomic add instead of a `sendto`. Waiting with a
-//!   timeout on such a listener would poll (iceoryx2's adaptive wait), so [`crate::Waiter`]
-//!   blocks in `sem_wait` itself and a per-thread timer interrupts it (`wait.rs`). The price:
-//!   a listener has no file descriptor, so it cannot be attached to a WaitSet; no agp process
-//!   uses one.
 //! - **No heap allocation per loaned sample**: iceoryx2 0.10 keeps each loan's bookkeeping
 //!   behind the service's `ArcThreadSafetyPolicy`, an `Rc` for `ipc::Service`, so every
 //!   `loan_uninit` called `malloc`. [`PooledRc`] is the same single-threaded reference count
 //!   with its blocks taken from a per-thread free list that only grows: once the pipeline
 //!   runs, a loan reuses the block the previous sample freed.
 //!
-//! Every process of one instance must use this type. iceoryx2 does not refuse a client of
-//! another event mechanism: a stock `ipc::Service` client (the PyPI `iceoryx2` package)
-//! opens every service and reads and writes samples, but its notifications and ours never
-//! meet, silently (`notify` reaches 0 listeners). Measured: docs/stock-clients/FINDINGS.md.
+//! Events are iceoryx2's stock ones (`event::recommended::Ipc`: counters in shared memory, a
+//! blocked listener woken through a Unix datagram socket), so that clients on stock
+//! iceoryx2 (the PyPI `iceoryx2` package, C, C++) wake agp processes and are woken by them.
+//! iceoryx2 names a listener's shared memory by a hash of the event type, so a process with
+//! any other event type opens every service and moves samples but never meets a listener of
+//! ours, silently (`notify` reaches 0 listeners): docs/stock-clients/FINDINGS.md. A listener
+//! has a file descriptor, which [`crate::Waiter`] blocks on (`wait.rs`).
+//!
+//! Every process of one instance must use this type.
 
 use core::fmt::Debug;
 use core::ptr::NonNull;
@@ -57,7 +54,7 @@ impl Service for AgpIpc {
     type SharedMemory = shared_memory::recommended::Ipc<PoolAllocator>;
     type ResizableSharedMemory = resizable_shared_memory::recommended::Ipc<PoolAllocator>;
     type Connection = zero_copy_connection::recommended::Ipc;
-    type Event = event::SemaphoreShmCountingBitSet;
+    type Event = event::recommended::Ipc;
     type Monitoring = monitoring::recommended::Ipc;
     type Reactor = reactor::recommended::Ipc;
     type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> = PooledRc<T>;

@@ -2,6 +2,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::FileDescriptorBased;
 
 use crate::AgpIpc;
 
@@ -108,12 +109,6 @@ impl WaitStrategy {
         }
     }
 
-    /// Whether a waiter with this strategy ever blocks on its listener (and so needs a
-    /// timer to end a block, and must take the notifications of input it found by polling).
-    pub fn blocks(&self) -> bool {
-        matches!(self, Self::Block | Self::SpinThenBlock { .. })
-    }
-
     pub fn name(&self) -> String {
         match self {
             Self::Spin => "spin".into(),
@@ -143,43 +138,29 @@ pub enum WaitOutcome<T> {
 /// Waits for input on one event service with a [`WaitStrategy`]; never blocks longer than
 /// the timeout it is given, and returns at once when shutdown is requested.
 ///
-/// Blocking is a `sem_wait` on the listener's futex (see `service.rs`), which has no
-/// timeout of its own: a timer of this thread (`DeadlineTimer`) sends it a signal at the
-/// end of each block, and that signal is unblocked only while the thread sits in `sem_wait`,
-/// so it never interrupts anything else.
+/// Blocking is a `ppoll` on the listener's Unix datagram socket (iceoryx2's stock event, see
+/// `service.rs`), which ends at its timeout to the microsecond, or at the notification, or
+/// at a signal (SIGTERM included: `poll` is never restarted after a handler).
+/// iceoryx2's own `timed_wait` on the same socket is no substitute: its timeout is a socket
+/// option the kernel counts in scheduler ticks (4 ms here), too coarse for physics pacing a
+/// 640 Hz loop.
 pub struct Waiter {
     listener: Listener<AgpIpc>,
     strategy: WaitStrategy,
-    timer: Option<DeadlineTimer>,
-    /// Inputs found since the last [`Waiter::drain`].
-    polled_since_drain: std::cell::Cell<u32>,
 }
 
-/// Inputs found by polling between two takes of the notifications that came with them
-/// (one take sweeps the listener's counters: about 0.4 us here).
-const DRAIN_EVERY: u32 = 64;
-
-/// Longest single block, so a shutdown request is seen within this even if no signal
-/// interrupts the wait.
+/// Longest single block, so a shutdown request is seen within this even if its signal went
+/// to another thread.
 const BLOCK_SLICE: Duration = Duration::from_millis(50);
 
-/// A block shorter than this is not worth a timer: the wait yields instead.
+/// A block shorter than this is not worth the system calls (and the kernel's timer slack
+/// would lengthen it): the wait yields instead.
 const SHORTEST_BLOCK: Duration = Duration::from_micros(50);
 
 impl Waiter {
     /// A waiter for `listener`, used on this thread (a listener never leaves its thread).
     pub fn new(listener: Listener<AgpIpc>, strategy: WaitStrategy) -> Self {
-        let timer = if strategy.blocks() {
-            DeadlineTimer::new()
-        } else {
-            None
-        };
-        Self {
-            listener,
-            strategy,
-            timer,
-            polled_since_drain: std::cell::Cell::new(0),
-        }
+        Self { listener, strategy }
     }
 
     pub fn strategy(&self) -> WaitStrategy {
@@ -195,22 +176,6 @@ impl Waiter {
         let start = Instant::now();
         loop {
             if let Some(v) = poll() {
-                if self.strategy.blocks() {
-                    // Senders notify every send, and a receiver that found its input by
-                    // polling took no notification: the semaphore would count them all, and
-                    // the first block after a long run would return at once and then take
-                    // them one by one. Taking them every DRAIN_EVERY inputs keeps the count
-                    // small at a fraction of the cost of a take per input. Each taken one
-                    // stands for input sent before now, which the next poll sees: no
-                    // wake-up is lost.
-                    let polled = self.polled_since_drain.get() + 1;
-                    if polled >= DRAIN_EVERY {
-                        self.drain();
-                        self.polled_since_drain.set(0);
-                    } else {
-                        self.polled_since_drain.set(polled);
-                    }
-                }
                 return WaitOutcome::Ready(v);
             }
             if shutdown_requested() {
@@ -231,127 +196,41 @@ impl Waiter {
         }
     }
 
-    /// Blocks until a notification or for `slice` at most. A notification sent between the
-    /// last poll and here stays counted in the semaphore, so this returns at once: no wake-up
-    /// is lost. Every way out (a notification, the timer, SIGTERM) just means "poll again".
+    /// Blocks until a notification or for `slice` at most. Every way out (a notification,
+    /// the timeout, a signal) just means "poll again".
+    ///
+    /// A notifier writes to the socket only when the listener's "notified" flag is clear,
+    /// and only taking the notifications clears it. So the block first takes what is
+    /// pending: when that is anything, input may have come since the last poll and the block
+    /// returns at once; when it is nothing, the flag is clear and the next notification
+    /// will reach the socket. Notifications of input found by polling never pile up: the
+    /// first block after a run of them takes them all at once.
     fn block(&self, slice: Duration) {
-        match &self.timer {
-            _ if slice < SHORTEST_BLOCK => std::thread::yield_now(),
-            Some(timer) => {
-                // The timer ticks every BLOCK_SLICE anyway: set it only for a shorter block.
-                if slice < BLOCK_SLICE {
-                    timer.arm(slice);
-                }
-                timer.unmask();
-                let _ = self.listener.blocking_wait(|_| {});
-                timer.mask();
-            }
-            // No timer for this thread: iceoryx2's own timed wait, which polls.
-            None => {
-                let _ = self.listener.timed_wait(|_| {}, slice);
-            }
+        if slice < SHORTEST_BLOCK {
+            std::thread::yield_now();
+            return;
         }
-    }
-
-    /// Consumes pending notifications without blocking.
-    pub fn drain(&self) {
-        let _ = self.listener.try_wait(|_| {});
-    }
-}
-
-/// The signal that ends a block at its deadline. Real-time signals above the few glibc
-/// keeps for itself are free for applications.
-fn wake_signal() -> libc::c_int {
-    libc::SIGRTMIN() + 6
-}
-
-extern "C" fn on_wake_signal(_: libc::c_int) {}
-
-/// The set holding only [`wake_signal`].
-fn wake_set() -> libc::sigset_t {
-    // SAFETY: sigemptyset/sigaddset initialise the set we own.
-    unsafe {
-        let mut set: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut set);
-        libc::sigaddset(&mut set, wake_signal());
-        set
-    }
-}
-
-/// A POSIX timer that signals the thread that made it every [`BLOCK_SLICE`], or sooner
-/// when a block must end sooner (then again every [`BLOCK_SLICE`]: a tick that fell just
-/// before the block began is followed by another), its signal unmasked only while the
-/// thread blocks. A block of [`BLOCK_SLICE`] may so end early, at the next tick: the waiter
-/// polls and blocks again.
-struct DeadlineTimer {
-    id: libc::timer_t,
-    set: libc::sigset_t,
-}
-
-impl DeadlineTimer {
-    /// Installs the signal's handler (once per process, without `SA_RESTART`, so the signal
-    /// ends `sem_wait`), masks the signal on this thread and makes its timer; `None` if the
-    /// system refuses one, and the waiter falls back to iceoryx2's timed wait.
-    fn new() -> Option<Self> {
-        static HANDLER: std::sync::Once = std::sync::Once::new();
-        HANDLER.call_once(|| {
-            // SAFETY: the handler does nothing, which is async-signal-safe.
-            unsafe {
-                let mut action: libc::sigaction = std::mem::zeroed();
-                action.sa_sigaction = on_wake_signal as extern "C" fn(libc::c_int) as usize;
-                libc::sigemptyset(&mut action.sa_mask);
-                action.sa_flags = 0;
-                libc::sigaction(wake_signal(), &action, std::ptr::null_mut());
-            }
-        });
-        let set = wake_set();
-        // SAFETY: plain system calls on values we own; the sigevent names this thread.
-        unsafe {
-            if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
-                return None;
-            }
-            let mut event: libc::sigevent = std::mem::zeroed();
-            event.sigev_notify = libc::SIGEV_THREAD_ID;
-            event.sigev_signo = wake_signal();
-            event.sigev_notify_thread_id = libc::gettid();
-            let mut id: libc::timer_t = std::ptr::null_mut();
-            if libc::timer_create(libc::CLOCK_MONOTONIC, &mut event, &mut id) != 0 {
-                return None;
-            }
-            let timer = Self { id, set };
-            timer.arm(BLOCK_SLICE);
-            Some(timer)
+        if !matches!(self.listener.try_wait(|_| {}), Ok(0)) {
+            return;
         }
-    }
-
-    fn arm(&self, first: Duration) {
-        let spec = |d: Duration| libc::timespec {
-            tv_sec: d.as_secs() as libc::time_t,
-            tv_nsec: d.subsec_nanos() as libc::c_long,
+        let timeout = libc::timespec {
+            tv_sec: slice.as_secs() as libc::time_t,
+            tv_nsec: slice.subsec_nanos() as libc::c_long,
         };
-        let value = libc::itimerspec {
-            it_value: spec(first),
-            it_interval: spec(BLOCK_SLICE),
+        // SAFETY: the listener's socket stays open while it lives, and it outlives this call;
+        // `ppoll` only reads the pollfd and the timespec we own and keeps the signal mask.
+        let woken = unsafe {
+            let mut socket = libc::pollfd {
+                fd: self.listener.file_descriptor().native_handle(),
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            libc::ppoll(&mut socket, 1, &timeout, std::ptr::null())
         };
-        // SAFETY: our own timer, a value we own.
-        unsafe { libc::timer_settime(self.id, 0, &value, std::ptr::null_mut()) };
-    }
-
-    fn unmask(&self) {
-        // SAFETY: changes this thread's mask only.
-        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &self.set, std::ptr::null_mut()) };
-    }
-
-    fn mask(&self) {
-        // SAFETY: changes this thread's mask only.
-        unsafe { libc::pthread_sigmask(libc::SIG_BLOCK, &self.set, std::ptr::null_mut()) };
-    }
-}
-
-impl Drop for DeadlineTimer {
-    fn drop(&mut self) {
-        // SAFETY: our own timer, deleted once. A tick still pending stays masked.
-        unsafe { libc::timer_delete(self.id) };
+        if woken > 0 {
+            // Take the notification now, so the next block does not return on it.
+            let _ = self.listener.try_wait(|_| {});
+        }
     }
 }
 
@@ -361,6 +240,8 @@ mod tests {
     use crate::Instance;
     use iceoryx2::port::notifier::Notifier;
     use iceoryx2::prelude::ServiceName;
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicU32;
 
     /// Runs `f` with a listener and a notifier of one event service of a private instance,
     /// then checks the instance left no file behind.
@@ -396,7 +277,7 @@ mod tests {
     fn a_block_with_nothing_to_wake_it_ends_at_the_timeout_not_before() {
         with_event("to", |listener, _| {
             let waiter = Waiter::new(listener, WaitStrategy::Block);
-            // Shorter than one timer period, and longer than two.
+            // Shorter than one block slice, and longer than two.
             for timeout in [
                 Duration::from_millis(20),
                 BLOCK_SLICE * 2 + Duration::from_millis(10),
@@ -413,7 +294,7 @@ mod tests {
                     "returned after {:?} of {timeout:?}",
                     start.elapsed()
                 );
-                // Blocking, not polling: a few polls per timer period at most.
+                // Blocking, not polling: a few polls per block slice at most.
                 assert!(
                     polls <= 4 * (timeout.as_millis() / BLOCK_SLICE.as_millis() + 2),
                     "{polls} polls in {timeout:?}"
@@ -435,13 +316,8 @@ mod tests {
                     WaitOutcome::Ready(i)
                 );
             }
-            let pending = waiter.listener.try_wait(|_| {}).expect("try_wait");
-            assert!(
-                pending <= u64::from(DRAIN_EVERY),
-                "{pending} notifications still counted"
-            );
             // Then nothing arrives: the block must wait for the timeout, not return at
-            // once on a notification already answered.
+            // once, again and again, on notifications already answered.
             let mut polls = 0;
             let outcome = waiter.wait_for(Duration::from_millis(20), || {
                 polls += 1;
@@ -473,12 +349,76 @@ mod tests {
                 }
             });
             assert_eq!(outcome, WaitOutcome::Ready(2));
-            // The other way out of the block is the timer's next tick.
+            // The other way out of the block is the end of its slice.
             assert!(
                 start.elapsed() < BLOCK_SLICE,
-                "woken after {:?}: by the timer, not the notification",
+                "woken after {:?}: at the slice's end, not by the notification",
                 start.elapsed()
             );
         });
+    }
+
+    #[test]
+    fn a_notification_from_another_node_wakes_a_block_in_progress() {
+        let instance = Instance::new(&format!("wwake{}", std::process::id())).expect("name");
+        instance.remove_files().expect("clean start");
+        let name: ServiceName = "wait-test.ev".try_into().expect("service name");
+        let open = |node: &iceoryx2::node::Node<AgpIpc>| {
+            node.service_builder(&name)
+                .event()
+                .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
+                .open_or_create()
+                .expect("event service")
+        };
+        let outcome = {
+            let node = instance.node("wait-listener", false).expect("node");
+            let service = open(&node);
+            let waiter = Waiter::new(
+                service.listener_builder().create().expect("listener"),
+                WaitStrategy::Block,
+            );
+            // The input: a flag the other thread raises before it notifies, a little after
+            // the waiter's first poll (so the waiter is blocked by then).
+            let sent = Arc::new(AtomicU32::new(0));
+            let polls = Arc::new(AtomicU32::new(0));
+            let notifier_thread = {
+                let (sent, polls, instance) = (sent.clone(), polls.clone(), instance.clone());
+                std::thread::spawn(move || {
+                    let node = instance.node("wait-notifier", false).expect("node");
+                    let service = node
+                        .service_builder(&name)
+                        .event()
+                        .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
+                        .open_or_create()
+                        .expect("event service");
+                    let notifier = service.notifier_builder().create().expect("notifier");
+                    while polls.load(Ordering::SeqCst) < 1 {
+                        std::thread::yield_now();
+                    }
+                    std::thread::sleep(Duration::from_millis(5));
+                    sent.store(1, Ordering::SeqCst);
+                    notifier.notify().expect("notify")
+                })
+            };
+            let start = Instant::now();
+            let outcome = waiter.wait_for(Duration::from_secs(20), || {
+                polls.fetch_add(1, Ordering::SeqCst);
+                (sent.load(Ordering::SeqCst) == 1).then_some(())
+            });
+            let woken_after = start.elapsed();
+            let reached = notifier_thread.join().expect("notifier thread");
+            (outcome, woken_after, reached, polls.load(Ordering::SeqCst))
+        };
+        let _ = instance.remove_files();
+        let (outcome, woken_after, reached, polls) = outcome;
+        assert_eq!(outcome, WaitOutcome::Ready(()));
+        assert_eq!(reached, 1, "the notification reached {reached} listeners");
+        // Woken by the notification, not by the end of a block slice: a handful of polls.
+        assert!(polls <= 6, "{polls} polls");
+        assert!(
+            woken_after < BLOCK_SLICE,
+            "woken after {woken_after:?}: at the slice's end, not by the notification"
+        );
+        assert!(instance.files().is_empty(), "left {:?}", instance.files());
     }
 }

@@ -85,6 +85,7 @@ struct Args {
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 fn main() {
+    agp_runtime::quiet_iceoryx2();
     alloc_count::enable_from_env();
     let result = run();
     alloc_count::report("agp-estimator", "learning", "frames");

@@ -73,6 +73,7 @@ struct Args {
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 fn main() {
+    agp_runtime::quiet_iceoryx2();
     alloc_count::enable_from_env();
     if let Err(e) = run() {
         eprintln!("agp-physics: error: {e:#}");
@@ -604,6 +605,7 @@ impl Runner {
             if self.apply_resets()? {
                 wheels = (0.0, 0.0);
             }
+            let epoch_before = self.active_epoch;
             self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
             let mut cause = TimingHeader::default();
             // The step of the newest frame a command of this tick answers.
@@ -631,7 +633,15 @@ impl Runner {
                 }
             }
             self.gate.name_strangers(&self.ports);
-            ticks.tick(self.sim.step_count(), answered);
+            if self.active_epoch != epoch_before {
+                ticks.flip();
+            }
+            if let Some(gap) = ticks.tick(self.sim.step_count(), answered) {
+                println!(
+                    "agp-physics: handover to epoch {}: {gap} tick(s) without a command",
+                    self.active_epoch
+                );
+            }
             if last_command.elapsed() > watchdog {
                 // Stale commands: stop, as the robot's firmware would.
                 wheels = (0.0, 0.0);
@@ -673,14 +683,33 @@ struct TickAccount {
     /// The longest run of ticks in a row without a command.
     longest_gap: u64,
     gap: u64,
+    /// Hot swaps: how many flipped the active epoch, the most ticks any of them went
+    /// without a command between the flip and the new planner's first, and the count for
+    /// the flip under way.
+    handovers: u64,
+    longest_handover: u64,
+    since_flip: Option<u64>,
 }
 
 impl TickAccount {
     /// Books the tick that steps the world from frame `step`, where `answered` is the
     /// step of the frame the newest command received in it answers.
-    fn tick(&mut self, step: u64, answered: Option<u64>) {
+    /// Returns the ticks the handover under way went without a command, when it ended in
+    /// this tick.
+    fn tick(&mut self, step: u64, answered: Option<u64>) -> Option<u64> {
+        let mut ended = None;
+        if let Some(n) = self.since_flip {
+            if answered.is_some() {
+                ended = Some(n);
+                self.handovers += 1;
+                self.longest_handover = self.longest_handover.max(n);
+                self.since_flip = None;
+            } else {
+                self.since_flip = Some(n + 1);
+            }
+        }
         match answered {
-            None if self.ticks == 0 => return,
+            None if self.ticks == 0 => return ended,
             None => {
                 self.missing += 1;
                 self.gap += 1;
@@ -696,6 +725,15 @@ impl TickAccount {
             }
         }
         self.ticks += 1;
+        ended
+    }
+}
+
+impl TickAccount {
+    /// The active epoch changed in this tick (a hot swap's flip): only commands of the new
+    /// planner count from now on.
+    fn flip(&mut self) {
+        self.since_flip = Some(0);
     }
 }
 
@@ -705,7 +743,21 @@ impl std::fmt::Display for TickAccount {
             f,
             "realtime: {} ticks since the first command: {} on time, {} late, {} missing (longest run without a command: {} ticks)",
             self.ticks, self.on_time, self.late, self.missing, self.longest_gap
-        )
+        )?;
+        if self.handovers > 0 || self.since_flip.is_some() {
+            write!(
+                f,
+                "; {} hot swap handovers, at most {} tick(s) without a command at one{}",
+                self.handovers,
+                self.longest_handover,
+                if self.since_flip.is_some() {
+                    " (one more flipped and never drove)"
+                } else {
+                    ""
+                }
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -783,5 +835,21 @@ mod tick_tests {
         t.tick(14, Some(14));
         assert_eq!((t.ticks, t.on_time, t.late, t.missing), (5, 2, 1, 2));
         assert_eq!(t.longest_gap, 2);
+    }
+
+    #[test]
+    fn a_handover_counts_the_ticks_from_the_flip_to_the_new_planners_first_command() {
+        let mut t = TickAccount::default();
+        t.tick(1, Some(1));
+        t.flip();
+        t.tick(2, None); // the old planner's commands no longer count
+        t.tick(3, Some(3));
+        t.flip();
+        t.tick(4, Some(4)); // the new planner answered within the tick of the flip
+        assert_eq!((t.handovers, t.longest_handover), (2, 1));
+        assert!(
+            t.to_string()
+                .contains("2 hot swap handovers, at most 1 tick(s)")
+        );
     }
 }

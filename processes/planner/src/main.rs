@@ -3,6 +3,7 @@
 mod grid_link;
 mod learn_mode;
 mod ring;
+mod serve_mode;
 mod task_mode;
 
 use std::time::Duration;
@@ -39,6 +40,11 @@ enum Mode {
     /// The trajectory task (benchmarks.md section 2): push the object's centroid along the
     /// scenario's path (`path_mm`, else 600 mm along +x from the object's start).
     Trajectory,
+    /// A live session: pursue the goals `agp goal` queues, one after the other (place or
+    /// trajectory), telling the supervisor when each ended so the judge scores it; wait
+    /// with the wheels stopped between goals; serve until `agp down`. Runs on either
+    /// clock (launch-live.toml: realtime).
+    Serve,
 }
 
 /// Chooses pushes and drives the robot.
@@ -96,6 +102,9 @@ struct Args {
     /// active, and reports its first applied command.
     #[arg(long, env = "AGP_EPOCH", default_value_t = 0)]
     epoch: u64,
+    /// Physics steps per second (paces the idle steps of `serve` on the lockstep clock).
+    #[arg(long, env = "AGP_RATE_HZ", default_value_t = 640.0)]
+    rate_hz: f64,
     /// Only check that these arguments fit the clock, then exit: 0 they do, 2 they do not
     /// (the reason on stderr). `agp up` runs it before it starts anything.
     #[arg(long)]
@@ -118,10 +127,10 @@ fn clock_refusal(args: &Args) -> Option<String> {
     match args.mode {
         Mode::Script => Some("`--mode script` needs the lockstep clock".to_owned()),
         Mode::Learn => Some("`--mode learn` (the learning phase) needs the lockstep clock".to_owned()),
-        Mode::Place | Mode::Trajectory if args.learn_if_missing => Some(
+        Mode::Place | Mode::Trajectory | Mode::Serve if args.learn_if_missing => Some(
             "`--learn-if-missing` may run the learning phase, which needs the lockstep clock: learn first (`agp up` with launch.toml, or `agp bench learn`), then run without it".to_owned(),
         ),
-        Mode::Place | Mode::Trajectory => None,
+        Mode::Place | Mode::Trajectory | Mode::Serve => None,
     }
 }
 
@@ -196,6 +205,7 @@ fn parse_goal(s: &str) -> Result<Pose2, String> {
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 fn main() {
+    agp_runtime::quiet_iceoryx2();
     alloc_count::enable_from_env();
     let result = {
         // Everything but the calls into iceoryx2 (booked by the lockstep driver and the
@@ -241,7 +251,7 @@ fn run() -> Result<()> {
             );
             learn_mode::run(&instance, &scenario, experimenter, args.epoch, &settings)
         }
-        Mode::Place | Mode::Trajectory => {
+        Mode::Place | Mode::Trajectory | Mode::Serve => {
             let ag_file = args.results.join(format!("{}.ag", scenario.name));
             if args.learn_if_missing && args.epoch == 0 && !ag_file.exists() {
                 println!(
@@ -259,20 +269,25 @@ fn run() -> Result<()> {
                     return Ok(());
                 }
             }
-            let kind = if args.mode == Mode::Place {
-                TaskKind::Place
-            } else {
+            let kind = if args.mode == Mode::Trajectory {
                 TaskKind::Trajectory
+            } else {
+                TaskKind::Place
             };
             let settings = task_mode::TaskSettings {
                 planner: args.planner,
                 task: task_mode::task_of(&scenario, kind, args.goal),
                 epoch: args.epoch,
+                realtime: args.clock == "realtime",
                 timeout: TIMEOUT,
                 gradient_timeout: Duration::from_secs(120),
                 ag_file,
                 trace: args.trace,
             };
+            if args.mode == Mode::Serve {
+                let paced = args.clock == "lockstep";
+                return serve_mode::run(&instance, &scenario, &settings, paced, args.rate_hz);
+            }
             let result = task_mode::run(&instance, &scenario, &settings)?;
             if let (Some(path), Some(r)) = (&args.report, &result) {
                 task_mode::write_report(path, r)?;

@@ -5,6 +5,12 @@
 //! frame before the planner sends an event about it or the command that makes the next
 //! frame, and draining events before each frame gives it the planner's events in order.
 //!
+//! On the realtime clock physics publishes frames whether commanded or not, so the frame
+//! the driver takes and the estimates that come in may part: the ring then takes a later
+//! frame until it holds one whose estimate is in and was made after the estimator read the
+//! planner's last event ([`Ring`]'s `catch_up`). In lockstep that is always the frame the
+//! last command made.
+//!
 //! Waiting: after a command or a reset the planner waits on the estimates' event service
 //! only, never on the frames': the estimator acknowledges a frame only after physics
 //! published it, so once the estimate of a frame newer than the latest is in, the new
@@ -36,6 +42,10 @@ pub struct EstimatorLink {
     reports: Subscriber<AgpIpc, LearnReport, ()>,
     reports_waiter: Waiter,
     seq: u64,
+    /// When the last event went out (CLOCK_MONOTONIC, taken once it was published; 0: none
+    /// yet). The estimator drains events after it stamps a frame's receipt, so an estimate
+    /// whose frame it received at or after this took the event in.
+    sent_ns: u64,
     /// Publish stamp of the newest frame the estimator acknowledged.
     acked_stamp: u64,
     /// The estimate of that frame and when it was received (CLOCK_MONOTONIC), until the
@@ -140,6 +150,7 @@ impl EstimatorLink {
                 WaitStrategy::Block,
             ),
             seq: 0,
+            sent_ns: 0,
             acked_stamp: 0,
             latest: None,
             newest: None,
@@ -229,6 +240,7 @@ impl EstimatorLink {
             .send()
             .map_err(|e| anyhow!("cannot send a learn event: {e:?}"))?;
         let _ = self.wake.notify();
+        self.sent_ns = monotonic_ns();
         Ok(())
     }
 
@@ -339,6 +351,7 @@ impl Ring {
         };
         let first = ring.frame();
         ring.ack(&first)?;
+        ring.catch_up()?;
         Ok(ring)
     }
 
@@ -363,7 +376,8 @@ impl Ring {
         let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.driver.send(l, r)?;
         let next = self.driver.frame().step + 1;
-        self.next_frame(next)
+        self.next_frame(next)?;
+        self.catch_up()
     }
 
     /// Puts the object and the robot at these poses; returns the frame of the reset world,
@@ -372,7 +386,37 @@ impl Ring {
         let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.driver.send_reset(object, robot)?;
         let same = self.driver.frame().step;
-        self.next_frame(same)
+        self.next_frame(same)?;
+        self.catch_up()
+    }
+
+    /// Makes the latest frame one whose estimate is at hand and took in every event this
+    /// planner sent: returns it. In lockstep the frame the last command made always is (the
+    /// estimator drains the events sent before a command before it observes the frame the
+    /// command makes, and acknowledges no later frame before the next command): nothing to
+    /// do. In realtime physics steps on its own and the estimator follows it, so two cases
+    /// need a later frame, taken without commanding (physics publishes one each period):
+    /// - the estimator acknowledged a newer frame than the latest (the planner connected
+    ///   while frames went by, or the estimator skipped one): the estimate of the latest
+    ///   frame is not (or no longer) there to be had, and the planner would go on with an
+    ///   older frame's estimate (at the start, `ObjectEstimate::default()`: a front gap of
+    ///   0 and the robot at the origin);
+    /// - the frame's estimate was made before the estimator read the planner's last event
+    ///   (physics published the frame while the planner was deciding): it does not show the
+    ///   event's effect yet (a circling's match, a push carried on).
+    fn catch_up(&mut self) -> Result<IrFrame> {
+        loop {
+            let f = self.frame();
+            let stamp = f.timing.stamps_ns[stage::FRAME_PUBLISHED];
+            let paired = self.estimate.timing.stamps_ns[stage::FRAME_PUBLISHED] == stamp;
+            let current =
+                self.estimate.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] >= self.link.sent_ns;
+            if paired && current {
+                return Ok(f);
+            }
+            let newer = *self.driver.await_newer_frame()?;
+            self.ack(&newer)?;
+        }
     }
 
     /// The frame the command or reset just sent makes (of step `step`), once the estimator

@@ -14,7 +14,9 @@
 //! have the object beside or behind it (its predecessor was travelling round the object or
 //! circling it), while the episode's first step drives straight ahead to find it: a planner
 //! that takes over a world under way first turns in place to face what its IR sees
-//! ([`face_object`]).
+//! ([`face_object`]). On the realtime clock physics steps before any planner comes: a
+//! planner started on a world no planner drove faces the object as in lockstep and turns
+//! not ([`under_way`]).
 
 use std::time::Duration;
 
@@ -40,6 +42,9 @@ pub struct TaskSettings {
     pub planner: PlannerKind,
     pub task: Task,
     pub epoch: u64,
+    /// Physics steps on the wall clock (`AGP_CLOCK=realtime`): it has stepped before any
+    /// planner came, so its step count says nothing of whether a planner drove.
+    pub realtime: bool,
     /// Safety net of every wait on another process.
     pub timeout: Duration,
     /// How long the estimator may take to publish the gradients (it may be learning).
@@ -136,149 +141,246 @@ pub fn run(
     scenario: &ScenarioBrief,
     settings: &TaskSettings,
 ) -> Result<Option<EpisodeResult>> {
-    if let Task::Trajectory { path } = &settings.task
-        && path.len() > MAX_PATH_POINTS
-    {
-        bail!(
-            "the trajectory has {} points; at most {MAX_PATH_POINTS} fit the task message",
-            path.len()
-        );
-    }
-    let robot = RobotDescription::epuck();
-    let gradient = if settings.planner.needs_gradient() {
-        let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
-        match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
-            Ok(g) => Some(g),
+    let Some(mut session) = Session::open(instance, scenario, settings)? else {
+        return Ok(None);
+    };
+    // A planner drove before this one came: it takes over a world under way.
+    let taking_over = session.under_way(scenario, settings);
+    session.pursue(scenario, &settings.task, taking_over)
+}
+
+/// A planner's hold on the ring for one task or many: the gradient, the ring to physics
+/// and the estimator, and the task topic the judge reads.
+pub struct Session {
+    world: PipelineWorld,
+    gradient: Option<AffordanceGradient>,
+    robot: RobotDescription,
+    tasks: TaskPublication,
+    planner: PlannerKind,
+    trace: bool,
+}
+
+impl Session {
+    /// Waits for the gradient (if the planner needs one), connects to physics and the
+    /// estimator and, for a swapped-in planner, takes over the drive. `None` on shutdown.
+    pub fn open(
+        instance: &Instance,
+        scenario: &ScenarioBrief,
+        settings: &TaskSettings,
+    ) -> Result<Option<Self>> {
+        if let Task::Trajectory { path } = &settings.task
+            && path.len() > MAX_PATH_POINTS
+        {
+            bail!(
+                "the trajectory has {} points; at most {MAX_PATH_POINTS} fit the task message",
+                path.len()
+            );
+        }
+        let robot = RobotDescription::epuck();
+        let gradient = if settings.planner.needs_gradient() {
+            let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
+            match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
+                Ok(g) => Some(g),
+                Err(e) if agp_runtime::shutdown_requested() => {
+                    let _ = e;
+                    return Ok(None);
+                }
+                Err(e) if e.is::<crate::grid_link::EstimatorWaitsToLearn>() => return Err(e),
+                Err(e) => return Err(e).context("no affordance gradient from the estimator"),
+            }
+        } else {
+            None
+        };
+        if let Some(g) = &gradient {
+            describe(g);
+        }
+        let driver = match LockstepDriver::connect(
+            instance,
+            "planner",
+            settings.epoch,
+            if settings.planner.reads_ground_truth() {
+                TruthAccess::GroundTruth
+            } else {
+                TruthAccess::SensesOnly
+            },
+            settings.timeout,
+        ) {
+            Ok(d) => d,
+            Err(DriveError::Shutdown) => return Ok(None),
+            Err(e) => return Err(e).context("cannot reach physics"),
+        };
+        let tasks = TaskPublication::open(instance)?;
+        let link = EstimatorLink::open(instance, settings.timeout)?;
+        // The ring first, then the swap: once this planner says it is ready, it has
+        // everything to answer the next frame.
+        let mut ring = match Ring::new(driver, link) {
+            Ok(r) => r,
             Err(e) if agp_runtime::shutdown_requested() => {
                 let _ = e;
                 return Ok(None);
             }
-            Err(e) if e.is::<crate::grid_link::EstimatorWaitsToLearn>() => return Err(e),
-            Err(e) => return Err(e).context("no affordance gradient from the estimator"),
-        }
-    } else {
-        None
-    };
-    if let Some(g) = &gradient {
-        describe(g);
-    }
-    let mut driver = match LockstepDriver::connect(
-        instance,
-        "planner",
-        settings.epoch,
-        if settings.planner.reads_ground_truth() {
-            TruthAccess::GroundTruth
-        } else {
-            TruthAccess::SensesOnly
-        },
-        settings.timeout,
-    ) {
-        Ok(d) => d,
-        Err(DriveError::Shutdown) => return Ok(None),
-        Err(e) => return Err(e).context("cannot reach physics"),
-    };
-    let _task = publish_task(instance, scenario, &settings.task)?;
-    let link = EstimatorLink::open(instance, settings.timeout)?;
-    let swap_in = match SwapIn::start(instance, &mut driver) {
-        Ok(s) => s,
-        Err(e) if agp_runtime::shutdown_requested() => {
-            let _ = e;
-            return Ok(None);
-        }
-        Err(e) => return Err(e),
-    };
-    let ring = match Ring::new(driver, link) {
-        Ok(r) => r,
-        Err(e) if agp_runtime::shutdown_requested() => {
-            let _ = e;
-            return Ok(None);
-        }
-        Err(e) => return Err(e).context("waiting for the estimator's first estimate"),
-    };
-    let mut world = PipelineWorld {
-        ring,
-        oracle: settings.planner.reads_ground_truth(),
-        swap_in,
-        epoch: settings.epoch,
-    };
-    let config = EpisodeConfig {
-        trace: settings.trace,
-        ..EpisodeConfig::for_task(&scenario.task)
-    };
-    // Steps were applied before this planner came: it takes over a world under way (the
-    // oracle knows where the object is and needs no finding).
-    let mut taking_over = world.step_count() > 0 && !settings.planner.reads_ground_truth();
-    println!(
-        "planner `{}`{}: {} of `{}`",
-        settings.planner,
-        if settings.planner.reads_ground_truth() {
-            " (reads the object's true pose: an upper bound, not a result)"
-        } else {
-            ""
-        },
-        describe_task(&settings.task),
-        scenario.name
-    );
-    loop {
-        if taking_over && world.step_count() > 0 {
-            match face_object(&mut world, &robot) {
-                Ok(facing) => println!(
-                    "planner: taking over at step {}: {facing}",
-                    world.step_count()
-                ),
+            Err(e) => return Err(e).context("waiting for the estimator's first estimate"),
+        };
+        let swap_in = match SwapIn::start(instance, &mut ring.driver) {
+            Ok(s) => s,
+            Err(e) if agp_runtime::shutdown_requested() => {
+                let _ = e;
+                return Ok(None);
+            }
+            Err(e) => return Err(e),
+        };
+        let mut world = PipelineWorld {
+            ring,
+            oracle: settings.planner.reads_ground_truth(),
+            swap_in,
+            epoch: settings.epoch,
+        };
+        if world.swap_in.is_some() {
+            // A swapped-in planner answers the first frame of its epoch at once, wheels
+            // stopped: it starts its episode over from where the robot is, and the
+            // handover costs physics no more than the period it takes.
+            match world.step(0.0, 0.0) {
+                Ok(()) => {}
                 Err(WorldStepError::Shutdown) => return Ok(None),
-                // A new world from the scenario's start: the robot faces the object.
-                Err(WorldStepError::Restarted) => {
-                    println!("planner: physics restarted: the episode starts over");
+                Err(e) => return Err(anyhow!(e)).context("the first command after the swap"),
+            }
+        }
+        Ok(Some(Self {
+            world,
+            gradient,
+            robot,
+            tasks,
+            planner: settings.planner,
+            trace: settings.trace,
+        }))
+    }
+
+    /// Whether a planner drove this world before this one came ([`under_way`]).
+    pub fn under_way(&self, scenario: &ScenarioBrief, settings: &TaskSettings) -> bool {
+        under_way(&self.world, settings, &scenario.robot.start)
+    }
+
+    /// The world, for a planner that waits between goals.
+    pub fn world(&mut self) -> &mut impl World {
+        &mut self.world
+    }
+
+    /// Publishes `task` for the judge and runs one episode of it from wherever the robot
+    /// and the object are; `taking_over`: the world is under way (another planner drove
+    /// it, or an earlier goal), so the robot first turns to face the object. Returns when
+    /// the episode ended (or on shutdown, with `Ok(None)`). A restarted physics or
+    /// estimator starts the episode over.
+    pub fn pursue(
+        &mut self,
+        scenario: &ScenarioBrief,
+        task: &Task,
+        taking_over: bool,
+    ) -> Result<Option<EpisodeResult>> {
+        self.tasks.send(scenario, task)?;
+        let mut config = EpisodeConfig {
+            trace: self.trace,
+            ..EpisodeConfig::for_task(&scenario.task)
+        };
+        let planner = self.planner;
+        let world = &mut self.world;
+        // The oracle knows where the object is and needs no finding.
+        let mut taking_over = taking_over && !planner.reads_ground_truth();
+        println!(
+            "planner `{}`{}: {} of `{}`",
+            planner,
+            if planner.reads_ground_truth() {
+                " (reads the object's true pose: an upper bound, not a result)"
+            } else {
+                ""
+            },
+            describe_task(task),
+            scenario.name
+        );
+        loop {
+            if taking_over && world.step_count() > 0 {
+                match face_object(world, &self.robot) {
+                    Ok(facing) => println!(
+                        "planner: taking over at step {}: {facing}",
+                        world.step_count()
+                    ),
+                    Err(WorldStepError::Shutdown) => return Ok(None),
+                    // A new world from the scenario's start: the robot faces the object.
+                    Err(WorldStepError::Restarted) => {
+                        println!("planner: physics restarted: the episode starts over");
+                    }
+                    Err(WorldStepError::EstimatorRestarted) => {
+                        println!("planner: the estimator restarted: the episode starts over");
+                    }
+                    Err(e) => return Err(anyhow!(e)),
                 }
-                Err(WorldStepError::EstimatorRestarted) => {
+            }
+            config.start_from_estimate = taking_over;
+            let outcome = drive_episode(
+                world,
+                &self.robot,
+                self.gradient.as_ref(),
+                planner,
+                task,
+                &config,
+            );
+            match outcome {
+                Ok(r) => {
+                    println!(
+                        "planner `{}`: {} after {} pushes and {} circlings, {:.1} s simulated, {:.2} s wall{}",
+                        r.planner,
+                        r.end.name(),
+                        r.pushes,
+                        r.circlings,
+                        r.sim_time_s,
+                        r.wall_time_s,
+                        r.final_estimate.map_or(String::new(), |p| format!(
+                            "; the object estimated at ({:.1}, {:.1}) mm, {:.1} deg",
+                            p.x * 1e3,
+                            p.y * 1e3,
+                            p.theta.to_degrees()
+                        ))
+                    );
+                    return Ok(Some(r));
+                }
+                Err(agp_planning::EpisodeRunError::World(WorldStepError::Shutdown)) => {
+                    return Ok(None);
+                }
+                Err(agp_planning::EpisodeRunError::World(WorldStepError::Restarted)) => {
+                    // A new world from the scenario's start: the episode starts over,
+                    // finding the object first, straight ahead.
+                    println!("planner: physics restarted: the episode starts over");
+                    taking_over = false;
+                }
+                Err(agp_planning::EpisodeRunError::World(WorldStepError::EstimatorRestarted)) => {
+                    // The same world, but what the estimator perceived is gone: the
+                    // episode starts over, finding the object first from wherever the
+                    // robot is.
                     println!("planner: the estimator restarted: the episode starts over");
+                    taking_over = !planner.reads_ground_truth();
                 }
                 Err(e) => return Err(anyhow!(e)),
             }
         }
-        let outcome = drive_episode(
-            &mut world,
-            &robot,
-            gradient.as_ref(),
-            settings.planner,
-            &settings.task,
-            &config,
-        );
-        match outcome {
-            Ok(r) => {
-                println!(
-                    "planner `{}`: {} after {} pushes and {} circlings, {:.1} s simulated, {:.2} s wall{}",
-                    r.planner,
-                    r.end.name(),
-                    r.pushes,
-                    r.circlings,
-                    r.sim_time_s,
-                    r.wall_time_s,
-                    r.final_estimate.map_or(String::new(), |p| format!(
-                        "; the object estimated at ({:.1}, {:.1}) mm, {:.1} deg",
-                        p.x * 1e3,
-                        p.y * 1e3,
-                        p.theta.to_degrees()
-                    ))
-                );
-                return Ok(Some(r));
-            }
-            Err(agp_planning::EpisodeRunError::World(WorldStepError::Shutdown)) => return Ok(None),
-            Err(agp_planning::EpisodeRunError::World(WorldStepError::Restarted)) => {
-                // A new world from the scenario's start: the episode starts over, finding
-                // the object first.
-                println!("planner: physics restarted: the episode starts over");
-            }
-            Err(agp_planning::EpisodeRunError::World(WorldStepError::EstimatorRestarted)) => {
-                // The same world, but what the estimator perceived is gone: the episode
-                // starts over, finding the object first from wherever the robot is.
-                println!("planner: the estimator restarted: the episode starts over");
-                taking_over = !settings.planner.reads_ground_truth();
-            }
-            Err(e) => return Err(anyhow!(e)),
-        }
     }
+}
+
+/// Whether a planner drove this world before this one came. In lockstep physics steps only
+/// on commands: any step was a planner's. In realtime it steps from its start whether
+/// commanded or not, so the steps say nothing: a planner swapped in (epoch > 0) takes over
+/// a world under way, and so does one started again on a world whose robot has left its
+/// start (odometry, noiseless while the wheels stand still). A fresh realtime start faces
+/// the object as a fresh lockstep start does: no turn in place to find it.
+fn under_way(world: &PipelineWorld, settings: &TaskSettings, start: &Pose) -> bool {
+    if !settings.realtime {
+        return world.step_count() > 0;
+    }
+    if settings.epoch > 0 {
+        return true;
+    }
+    let odometry = world.senses().odometry;
+    let moved = (odometry.position() - start.position()).length();
+    let turned = agp_shared_types::angle::wrap_angle(odometry.theta - start.theta).abs();
+    moved > 1e-4 || turned > 1e-3
 }
 
 /// How [`face_object`] left the robot.
@@ -289,6 +391,8 @@ enum Facing {
     Turned { turned_rad: f64 },
     /// No ray saw anything within a full turn: the robot is back at its heading.
     NotSeen,
+    /// The estimator holds the object's pose: the episode turns towards it.
+    Estimated,
 }
 
 impl std::fmt::Display for Facing {
@@ -301,6 +405,7 @@ impl std::fmt::Display for Facing {
                 turned_rad.to_degrees()
             ),
             Self::NotSeen => write!(f, "no IR sees the object within a full turn"),
+            Self::Estimated => write!(f, "the estimator holds the object's pose"),
         }
     }
 }
@@ -334,6 +439,11 @@ fn face_object(
     let senses = world.senses();
     if strongest(robot, &senses.ir_raw).is_some_and(front) {
         return Ok(Facing::Ahead);
+    }
+    let e = world.perceived();
+    if e.valid == 1 && e.sigma_xy.is_finite() {
+        // The episode faces the object where the estimator holds it.
+        return Ok(Facing::Estimated);
     }
     let v = FACE_TURN_FRACTION * robot.max_wheel_speed;
     let rate = 2.0 * v / robot.axle_length;
@@ -387,62 +497,66 @@ fn describe_task(task: &Task) -> String {
     }
 }
 
-/// The task as published: the publisher's history hands it to late readers while it lives.
+/// The instance's latched `task` topic, as this planner publishes it: the task under way,
+/// what the judge scores. The publisher's history hands it to late readers while it lives.
 struct TaskPublication {
-    _publisher: Publisher<AgpIpc, agp_shared_types::Task, ()>,
+    publisher: Publisher<AgpIpc, agp_shared_types::Task, ()>,
     _node: Node<AgpIpc>,
 }
 
-/// Publishes the task on the instance's latched `task` topic: what the evaluation judges.
-fn publish_task(
-    instance: &Instance,
-    scenario: &ScenarioBrief,
-    task: &Task,
-) -> Result<TaskPublication> {
-    let node = instance
-        .node("planner-task", false)
-        .map_err(|e| anyhow!("cannot create the task node: {e:?}"))?;
-    let topic = instance
-        .task(&node)
-        .map_err(|e| anyhow!("cannot open the task topic: {e:?}"))?;
-    let publisher = topic
-        .data
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow!("cannot publish the task: {e:?}"))?;
-    let t = &scenario.task;
-    let mut msg = agp_shared_types::Task {
-        kind: TaskKind::Place as u32,
-        path_len: 0,
-        goal: Pose2::default(),
-        tolerance_m: t.tolerance_m,
-        tolerance_rad: t.tolerance_rad,
-        path: [[0.0; 2]; MAX_PATH_POINTS],
-        max_pushes: t.max_pushes,
-        _pad: 0,
-        seed: t.seed,
-    };
-    match task {
-        Task::Place { goal } => msg.goal = *goal,
-        Task::Trajectory { path } => {
-            msg.kind = TaskKind::Trajectory as u32;
-            msg.path_len = path.len() as u32;
-            for (slot, p) in msg.path.iter_mut().zip(path.iter().copied()) {
-                *slot = DVec2::to_array(&p);
+impl TaskPublication {
+    fn open(instance: &Instance) -> Result<Self> {
+        let node = instance
+            .node("planner-task", false)
+            .map_err(|e| anyhow!("cannot create the task node: {e:?}"))?;
+        let topic = instance
+            .task(&node)
+            .map_err(|e| anyhow!("cannot open the task topic: {e:?}"))?;
+        let publisher = topic
+            .data
+            .publisher_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot publish the task: {e:?}"))?;
+        Ok(Self {
+            publisher,
+            _node: node,
+        })
+    }
+
+    /// Publishes `task` with the scenario's tolerances.
+    fn send(&self, scenario: &ScenarioBrief, task: &Task) -> Result<()> {
+        let t = &scenario.task;
+        let mut msg = agp_shared_types::Task {
+            kind: TaskKind::Place as u32,
+            path_len: 0,
+            goal: Pose2::default(),
+            tolerance_m: t.tolerance_m,
+            tolerance_rad: t.tolerance_rad,
+            path: [[0.0; 2]; MAX_PATH_POINTS],
+            max_pushes: t.max_pushes,
+            _pad: 0,
+            seed: t.seed,
+        };
+        match task {
+            Task::Place { goal } => msg.goal = *goal,
+            Task::Trajectory { path } => {
+                msg.kind = TaskKind::Trajectory as u32;
+                msg.path_len = path.len().min(MAX_PATH_POINTS) as u32;
+                for (slot, p) in msg.path.iter_mut().zip(path.iter().copied()) {
+                    *slot = DVec2::to_array(&p);
+                }
             }
         }
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| anyhow!("cannot loan the task sample: {e:?}"))?;
+        sample
+            .write_payload(msg)
+            .send()
+            .map_err(|e| anyhow!("cannot send the task: {e:?}"))?;
+        Ok(())
     }
-    let sample = publisher
-        .loan_uninit()
-        .map_err(|e| anyhow!("cannot loan the task sample: {e:?}"))?;
-    sample
-        .write_payload(msg)
-        .send()
-        .map_err(|e| anyhow!("cannot send the task: {e:?}"))?;
-    Ok(TaskPublication {
-        _publisher: publisher,
-        _node: node,
-    })
 }
 
 /// Writes the planner's account of `r` (no ground truth in it) as one JSON object.

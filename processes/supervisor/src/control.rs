@@ -10,6 +10,8 @@ use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 
+use crate::goals::GoalReport;
+
 /// How long the children of a dead supervisor may take to die before `agp down` names
 /// them and refuses to clean.
 const DEAD_CHILDREN_WAIT: Duration = Duration::from_secs(3);
@@ -78,6 +80,10 @@ pub struct StatusReport {
     /// Live nodes of the instance that are neither the supervisor's, nor its processes',
     /// nor a client's: processes that joined the instance on their own.
     pub strangers: Vec<StrangerReport>,
+    /// Goals queued to a live session so far (`agp goal`), and the latest of them, oldest
+    /// first, each with the judge's verdict once done.
+    pub goals_total: u32,
+    pub goals: Vec<GoalReport>,
 }
 
 impl StatusReport {
@@ -111,6 +117,11 @@ impl StatusReport {
                     node: read_str(&s.name),
                     pid: s.pid,
                 })
+                .collect(),
+            goals_total: r.goals_total,
+            goals: r.goals[..(r.goal_count as usize).min(r.goals.len())]
+                .iter()
+                .map(GoalReport::new)
                 .collect(),
         }
     }
@@ -158,6 +169,21 @@ impl StatusReport {
                 "  paused: {} process(es) by `agp profile` for {:.1} s more",
                 self.paused, self.pause_left_s
             );
+        }
+        if self.goals_total > 0 {
+            let shown = self.goals.len();
+            println!(
+                "  goals: {} queued so far{}",
+                self.goals_total,
+                if (shown as u32) < self.goals_total {
+                    format!(", the latest {shown}:")
+                } else {
+                    ":".to_owned()
+                }
+            );
+            for g in &self.goals {
+                println!("    {}", g.line());
+            }
         }
         for s in &self.strangers {
             println!(

@@ -36,7 +36,11 @@ use iceoryx2::port::server::Server;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{CallbackProgression, Node};
 
-use agp_supervisor::LaunchConfig;
+use agp_harness::evaluation::RunJudge;
+use agp_supervisor::{LaunchConfig, check_goal};
+use agp_world::TaskSpec;
+
+use crate::goals::GoalBook;
 
 use crate::rates::MessageRates;
 use crate::up::{Log, RunEnd, Slot, SlotState, describe, spawn_process};
@@ -138,6 +142,8 @@ pub(crate) struct ControlPlane {
     /// The pause `agp profile` holds, if any.
     pause: Option<PauseLease>,
     instance: Instance,
+    /// The goals of a live session.
+    pub(crate) goals: GoalBook,
 }
 
 fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> anyhow::Error {
@@ -153,8 +159,10 @@ impl ControlPlane {
         node: &Node<AgpIpc>,
         log: &Log,
         waiting: &str,
+        task: &TaskSpec,
     ) -> Result<Self> {
         let service = instance.create_control(node)?;
+        let goals = GoalBook::open(instance, node, task)?;
         let server = service
             .server_builder()
             .create()
@@ -184,6 +192,7 @@ impl ControlPlane {
             waiting: waiting.to_owned(),
             pause: None,
             instance: instance.clone(),
+            goals,
             rates: match MessageRates::open(instance, node) {
                 Ok(r) => Some(r),
                 Err(e) => {
@@ -231,9 +240,11 @@ impl ControlPlane {
         &mut self,
         config: &LaunchConfig,
         slots: &mut [Slot<'_>],
+        judge: &RunJudge,
         log: &Log,
     ) -> Option<RunEnd> {
         let mut end = None;
+        self.goals.update_connections();
         loop {
             let request = match self.server.receive() {
                 Ok(Some(r)) => r,
@@ -276,6 +287,20 @@ impl ControlPlane {
                     let result = self.on_resume(payload.pid, log);
                     self.answer(&request, slots, log, result.map(|()| 0));
                 }
+                Some(ControlKind::Goal) => {
+                    let result = check_goal(&payload.goal)
+                        .and_then(|()| self.goals.queue(payload.goal, log));
+                    self.answer(&request, slots, log, result);
+                }
+                Some(ControlKind::GoalDone) => {
+                    let end = read_str(&payload.name);
+                    let sim_time_s = payload.value_ns as f64 * 1e-9;
+                    let result = self
+                        .goals
+                        .done(payload.goal.id, &end, sim_time_s, judge, log)
+                        .map(|()| payload.goal.id);
+                    self.answer(&request, slots, log, result);
+                }
                 None => {
                     let why = format!("unknown request kind {}", payload.kind);
                     self.answer(&request, slots, log, Err(why));
@@ -297,9 +322,15 @@ impl ControlPlane {
             supervisor_pid: std::process::id(),
             uptime_ms: u64::try_from(log.start.elapsed().as_millis()).unwrap_or(u64::MAX),
             active_epoch: self.active_epoch,
-            handover_ns: *result.as_ref().unwrap_or(&0),
             ..ControlResponse::default()
         };
+        match ControlKind::from_u32(request.payload().kind) {
+            Some(ControlKind::Goal | ControlKind::GoalDone) => {
+                response.goal_id = *result.as_ref().unwrap_or(&0);
+            }
+            _ => response.handover_ns = *result.as_ref().unwrap_or(&0),
+        }
+        self.goals.fill(&mut response);
         if let Err(why) = &result {
             write_str(&mut response.message, why);
         }

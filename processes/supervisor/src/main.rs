@@ -4,6 +4,7 @@ use agp_harness::{bench_learn, bench_paper, bench_tasks, probe};
 
 mod control;
 mod control_plane;
+mod goals;
 mod profile;
 mod rates;
 mod signals;
@@ -13,7 +14,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use agp_runtime::{InstanceLock, control_client};
-use agp_supervisor::{LaunchConfig, LaunchOptions};
+use agp_supervisor::{GoalSpec, LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
@@ -58,6 +59,14 @@ enum Cmd {
     /// planner author. A build that does not become ready is rolled back, and the watch
     /// goes on.
     Swap(SwapArgs),
+    /// Give a live session a goal. Its serving planner (`agp-planner --mode serve`, as in
+    /// launch-live.toml) pursues the goals one after the other, in the order given; the
+    /// judge scores each by ground truth as it ends, and `agp status` lists them with
+    /// their verdicts (`--json`: under `goals`).
+    ///
+    /// Examples: agp goal --instance live --place 300 150 90
+    ///           agp goal --instance live --path 0,0 200,0 300,100
+    Goal(GoalArgs),
     /// Measure where the time of a control step goes on a running instance: each hop, each
     /// stage and end to end (IR frame published -> the motor command it caused applied),
     /// beside the floor of a bare iceoryx2 ping-pong with the same waiting strategy.
@@ -103,6 +112,26 @@ struct StatusArgs {
     #[arg(long, default_value = "launch.toml")]
     launch: PathBuf,
     /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("what").required(true).args(["place", "path"])))]
+struct GoalArgs {
+    /// Place the object at X_MM Y_MM (world frame, millimetres) turned THETA_DEG degrees.
+    #[arg(long, num_args = 3, value_names = ["X_MM", "Y_MM", "THETA_DEG"], allow_hyphen_values = true)]
+    place: Option<Vec<f64>>,
+    /// Push the object's centroid along this path: 2 to 32 points X,Y in millimetres.
+    #[arg(long, num_args = 2.., value_name = "X,Y", allow_hyphen_values = true)]
+    path: Option<Vec<String>>,
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    launch: PathBuf,
+    /// Print JSON: the goal's id and the goals so far.
     #[arg(long)]
     json: bool,
 }
@@ -197,8 +226,12 @@ enum ProbeCmd {
 }
 
 fn main() -> ExitCode {
+    agp_runtime::quiet_iceoryx2();
     let cli = Cli::parse();
-    if matches!(cli.command, Cmd::Status(_) | Cmd::Down(_) | Cmd::Swap(_)) {
+    if matches!(
+        cli.command,
+        Cmd::Status(_) | Cmd::Down(_) | Cmd::Swap(_) | Cmd::Goal(_)
+    ) {
         // A reader that stops early (`agp status | head -1`) ends these quickly-done
         // commands quietly, as it ends `ls`. The others own children and shared memory to
         // clean up, and keep Rust's default (a write error instead of the signal).
@@ -210,6 +243,7 @@ fn main() -> ExitCode {
         Cmd::Status(args) => status(args),
         Cmd::Down(args) => down(args),
         Cmd::Swap(args) => swap(args),
+        Cmd::Goal(args) => goal(args),
         Cmd::Profile(args) => profile::run(args),
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
         Cmd::Bench {
@@ -373,6 +407,51 @@ fn status(args: &StatusArgs) -> Result<u8> {
         );
     } else {
         report.print();
+    }
+    Ok(0)
+}
+
+fn goal(args: &GoalArgs) -> Result<u8> {
+    let spec = match (&args.place, &args.path) {
+        (Some(p), _) => GoalSpec::place(p[0], p[1], p[2]),
+        (None, Some(words)) => GoalSpec::path(words),
+        (None, None) => unreachable!("clap requires --place or --path"),
+    }
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let mut request = agp_shared_types::ControlRequest::new(agp_shared_types::ControlKind::Goal);
+    request.goal = spec.to_goal();
+    let r = control_client::ask_with(&name, request, control_client::ANSWER_TIMEOUT)?;
+    if r.ok == 0 {
+        anyhow::bail!(
+            "instance `{name}` refused the goal: {}",
+            agp_shared_types::read_str(&r.message)
+        );
+    }
+    let report = control::StatusReport::new(&name, &r);
+    if args.json {
+        let doc = serde_json::json!({
+            "instance": name,
+            "goal_id": r.goal_id,
+            "goals": report.goals,
+        });
+        println!("{doc:#}");
+    } else {
+        let ahead = report
+            .goals
+            .iter()
+            .filter(|g| g.id < r.goal_id && g.state != "done")
+            .count();
+        println!(
+            "goal {} queued on `{name}`: {} ({})",
+            r.goal_id,
+            spec.describe(),
+            match ahead {
+                0 => "pursued now".to_owned(),
+                1 => "after 1 goal".to_owned(),
+                n => format!("after {n} goals"),
+            }
+        );
     }
     Ok(0)
 }

@@ -360,6 +360,8 @@ struct Sampling {
     steps: u64,
     span_ns: u64,
     elapsed: Duration,
+    /// The instance went down while it was sampled (its supervisor let go of it).
+    ended_early: bool,
 }
 
 impl Sampling {
@@ -395,12 +397,22 @@ fn sample_pipeline(instance: &Instance, seconds: f64) -> Result<Sampling> {
         steps: 0,
         span_ns: 0,
         elapsed: Duration::ZERO,
+        ended_early: false,
     };
     let mut last: Option<IrFrame> = None;
     let duration = Duration::from_secs_f64(seconds);
     let start = Instant::now();
+    let mut next_check = start;
     while start.elapsed() < duration && !shutdown_requested() {
         s.polls += 1;
+        if Instant::now() >= next_check {
+            // An instance that goes down ends the sampling: what came so far is kept.
+            if !InstanceLock::is_held(instance) {
+                s.ended_early = true;
+                break;
+            }
+            next_check = Instant::now() + Duration::from_millis(100);
+        }
         while let Some(sample) = subscriber
             .receive()
             .map_err(|e| anyhow!("cannot receive an IR frame: {e:?}"))?
@@ -865,6 +877,14 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
     if shutdown_requested() {
         bail!("interrupted");
     }
+    let ended_early = sampling.ended_early;
+    if ended_early {
+        crate::up::warn(format_args!(
+            "agp: error: instance `{name}` went down {:.1} s into the {:.1} s profile; what was sampled until then follows (the floor runs alone: no pipeline is left to pause)",
+            sampling.elapsed.as_secs_f64(),
+            args.seconds
+        ));
+    }
     if sampling.frames == 0 {
         bail!(
             "no IR frame of instance `{name}` arrived in {:.1} s: is physics running?",
@@ -881,7 +901,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
     let floor = run_floor(
         args.floor_seconds,
         waiting,
-        (!args.no_pause).then_some(&instance),
+        (!args.no_pause && !ended_early).then_some(&instance),
     )
     .context("the floor failed")?;
     let paused = floor.paused.map(|n| n as usize);
@@ -906,7 +926,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
     if let Some(path) = &args.plot {
         report.plot(path)?;
     }
-    Ok(0)
+    Ok(u8::from(ended_early))
 }
 
 struct Report {
@@ -1069,6 +1089,7 @@ impl Report {
                     POLL_PERIOD.as_millis()
                 ),
                 "seconds": s.elapsed.as_secs_f64(),
+                "instance_went_down": s.ended_early,
                 "wake_ups": s.polls,
                 "frames": s.frames,
                 "frames_without_cause": s.uncaused,
@@ -1310,6 +1331,7 @@ mod tests {
             steps: 0,
             span_ns: 0,
             elapsed: Duration::from_secs(1),
+            ended_early: false,
         };
         for r in &mut sampling.rows {
             if r.route != Route::Estimator {

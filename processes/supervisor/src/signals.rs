@@ -18,7 +18,7 @@ extern "C" fn on_stop_signal(signal: libc::c_int) {
 /// The signals that stop the supervisor cleanly: every catchable one whose default action
 /// ends the process, but those a fault raises in the faulting thread (SIGSEGV, SIGBUS,
 /// SIGFPE, SIGILL, SIGTRAP, SIGSYS, SIGABRT), which cannot be returned from, and the
-/// real-time ones (the waiting code of `agp_runtime` uses one as its timer).
+/// real-time ones.
 ///
 /// SIGPIPE is one: a write to a closed stdout (`agp up | head -1`) raises it, and the run
 /// then stops as on SIGTERM and exits 128 + 13, as a shell pipeline expects.

@@ -232,7 +232,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     };
 
     let waiting = config.waiting(WaitStrategy::from_env_checked().ok().flatten());
-    let mut control = match ControlPlane::open(&instance, &node, &log, &waiting) {
+    let mut control = match ControlPlane::open(&instance, &node, &log, &waiting, &scenario.task) {
         Ok(c) => c,
         Err(e) => {
             drop(services);
@@ -267,9 +267,22 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     // The judge reads ground truth and the task the planner publishes; it judges the
     // run once it is over (a run with no task, the scripted drive, gets no verdict).
     let judge = RunJudge::spawn(&instance, scenario.clone());
-    let end = run(config, &mut slots, &node, &mut control, &log);
+    let end = run(config, &mut slots, &node, &mut control, &judge, &log);
     control.shutdown(&slots, &log);
-    let verdict = judge.finish();
+    let mut verdict = judge.finish();
+    // A live session judged each goal as it ended: its record is the goals' JSON, not one
+    // verdict of whatever was under way at the end.
+    let session = control.goals.any();
+    if session {
+        verdict = Ok(None);
+        match control.goals.write_json(&config.results, &config.instance) {
+            Ok(path) => say(format_args!(
+                "agp: goals of the session: {}",
+                path.display()
+            )),
+            Err(e) => warn(format_args!("agp: error: {e:#}")),
+        }
+    }
 
     stop_all(&mut slots, &log);
     node.try_cleanup_dead_nodes();
@@ -431,6 +444,7 @@ fn run(
     slots: &mut [Slot<'_>],
     node: &Node<AgpIpc>,
     control: &mut ControlPlane,
+    judge: &RunJudge,
     log: &Log,
 ) -> RunEnd {
     for slot in slots.iter_mut() {
@@ -454,7 +468,7 @@ fn run(
         if slots.iter().all(|s| matches!(s.state, SlotState::Done)) {
             return RunEnd::AllExited;
         }
-        if let Some(end) = control.serve(config, slots, log) {
+        if let Some(end) = control.serve(config, slots, judge, log) {
             return end;
         }
         control.poll(slots, log);

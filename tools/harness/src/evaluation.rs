@@ -14,7 +14,7 @@ use agp_planning::{
     EpisodeConfig, EstimateLog, EstimateVerdict, Evaluation, PoseSample, Task, distance_to_path,
 };
 use agp_runtime::{AgpIpc, Instance};
-use agp_shared_types::{GroundTruth, ObjectEstimate, TaskKind};
+use agp_shared_types::{GroundTruth, ObjectEstimate};
 use agp_world::Scenario;
 use anyhow::{Result, anyhow, bail};
 use glam::DVec2;
@@ -275,19 +275,7 @@ impl EstimateRecorder {
 
 /// The task as the planner published it, in the planner library's terms.
 pub fn task_of(msg: &agp_shared_types::Task) -> Option<Task> {
-    match msg.kind {
-        k if k == TaskKind::Place as u32 => Some(Task::Place { goal: msg.goal }),
-        k if k == TaskKind::Trajectory as u32 => {
-            let n = (msg.path_len as usize).min(msg.path.len());
-            Some(Task::Trajectory {
-                path: msg.path[..n]
-                    .iter()
-                    .map(|p| DVec2::from_array(*p))
-                    .collect(),
-            })
-        }
-        _ => None,
-    }
+    Task::from_message(msg)
 }
 
 /// How an `agp up` run ended, judged by ground truth.
@@ -310,6 +298,7 @@ pub struct RunVerdict {
 pub struct RunJudge {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<Result<Option<RunVerdict>>>>,
+    requests: std::sync::mpsc::Sender<JudgeNow>,
 }
 
 impl RunJudge {
@@ -322,15 +311,33 @@ impl RunJudge {
         let flag = Arc::clone(&stop);
         let instance = instance.clone();
         let (listening, listens) = std::sync::mpsc::channel();
+        let (requests, requested) = std::sync::mpsc::channel();
         let thread = std::thread::Builder::new()
             .name("agp-judge".into())
-            .spawn(move || watch(&instance, &scenario, &flag, &listening))
+            .spawn(move || watch(&instance, &scenario, &flag, &listening, &requested))
             .ok();
         if thread.is_some() {
             // An error or a panic of the judge drops the sender: no wait then either.
             let _ = listens.recv();
         }
-        Self { stop, thread }
+        Self {
+            stop,
+            thread,
+            requests,
+        }
+    }
+
+    /// Judges the task under way now (a goal of a live session ended) and starts over with
+    /// the next task published: `None` when no task was published since the last verdict.
+    /// Waits up to `timeout` for the judge's thread.
+    pub fn judge_now(&self, timeout: Duration) -> Result<Option<RunVerdict>> {
+        let (reply, answer) = std::sync::mpsc::channel();
+        self.requests
+            .send(reply)
+            .map_err(|_| anyhow!("the judge has stopped"))?;
+        answer
+            .recv_timeout(timeout)
+            .map_err(|_| anyhow!("the judge did not answer within {timeout:?}"))?
     }
 
     /// Stops watching and judges what the run left: `None` when no task was published
@@ -355,11 +362,15 @@ impl Drop for RunJudge {
     }
 }
 
+/// A request to the judge's thread: judge the task under way now.
+type JudgeNow = std::sync::mpsc::Sender<Result<Option<RunVerdict>>>;
+
 fn watch(
     instance: &Instance,
     scenario: &Scenario,
     stop: &AtomicBool,
     listening: &std::sync::mpsc::Sender<()>,
+    requests: &std::sync::mpsc::Receiver<JudgeNow>,
 ) -> Result<Option<RunVerdict>> {
     let node = instance
         .node("agp-judge", false)
@@ -376,27 +387,49 @@ fn watch(
     let mut estimates = EstimateRecorder::open(instance, &node)?;
     let _ = listening.send(());
     let mut task = None;
-    while !stop.load(Ordering::Relaxed) {
-        truth.drain()?;
-        estimates.drain(task.is_some());
+    let take_tasks = |task: &mut Option<Task>,
+                      truth: &mut TruthRecorder,
+                      estimates: &mut EstimateRecorder|
+     -> Result<()> {
         while let Ok(Some(t)) = tasks.receive() {
             if task.is_none() {
-                // Recording starts with the task: what came before (learning) is no part
-                // of it.
+                // Recording starts with the task: what came before (learning, the goal
+                // judged before) is no part of it.
                 truth.restart()?;
                 estimates.restart();
             }
-            task = task_of(&t);
-            truth.follow_path(match &task {
+            *task = task_of(&t);
+            truth.follow_path(match task {
                 Some(Task::Trajectory { path }) => Some(path),
                 _ => None,
             });
         }
+        Ok(())
+    };
+    while !stop.load(Ordering::Relaxed) {
+        truth.drain()?;
+        estimates.drain(task.is_some());
+        take_tasks(&mut task, &mut truth, &mut estimates)?;
+        while let Ok(reply) = requests.try_recv() {
+            // A goal of a live session ended: judge it now, and record the next one
+            // from its own task on.
+            let verdict = verdict(scenario, &config, task.take(), &mut truth, &mut estimates);
+            let _ = reply.send(verdict);
+        }
         std::thread::sleep(Duration::from_millis(1));
     }
-    while let Ok(Some(t)) = tasks.receive() {
-        task = task_of(&t);
-    }
+    take_tasks(&mut task, &mut truth, &mut estimates)?;
+    verdict(scenario, &config, task, &mut truth, &mut estimates)
+}
+
+/// The verdict on `task` from what was recorded since it began.
+fn verdict(
+    scenario: &Scenario,
+    config: &EpisodeConfig,
+    task: Option<Task>,
+    truth: &mut TruthRecorder,
+    estimates: &mut EstimateRecorder,
+) -> Result<Option<RunVerdict>> {
     let Some(task) = task else {
         return Ok(None);
     };
@@ -413,7 +446,7 @@ fn watch(
         &task,
         last.object,
         order,
-        &config,
+        config,
         std::mem::take(&mut truth.samples),
     );
     Ok(Some(RunVerdict {

@@ -133,3 +133,27 @@ fn our_push_search_chooses_a_push_of_the_reference_searchs_cost() {
         "the search found no push"
     );
 }
+
+#[test]
+fn a_planner_given_other_push_lengths_plans_as_one_built_with_them() {
+    let scenario = Scenario::builtin("triangle").expect("built-in");
+    let ag = learn_from_sim(&scenario, 12).expect("a gradient");
+    let robot = RobotDescription::epuck();
+    let settings = PushChoiceSettings {
+        contact_count: 36,
+        alpha_step_deg: 5.0,
+        ..PushChoiceSettings::new(3, start_radius_m(&scenario, &robot))
+    };
+    let shared = PushPlanner::new(&ag, settings.clone()).with_push_fractions(vec![1.0]);
+    let built = PushPlanner::new(
+        &ag,
+        PushChoiceSettings {
+            push_fractions: vec![1.0],
+            ..settings
+        },
+    );
+    let estimate = Pose2::new(0.1, -0.05, 0.3);
+    for goal in random_goals(4, 2) {
+        assert_eq!(shared.plan(estimate, &goal), built.plan(estimate, &goal));
+    }
+}
