@@ -64,8 +64,9 @@ enum Cmd {
     /// judge scores each by ground truth as it ends, and `agp status` lists them with
     /// their verdicts (`--json`: under `goals`).
     ///
-    /// Examples: agp goal --instance live --place 300 150 90
-    ///           agp goal --instance live --path 0,0 200,0 300,100
+    /// Example: agp goal --instance live --place 300 150 90
+    ///
+    /// Example: agp goal --instance live --path 0,0 200,0 300,100
     Goal(GoalArgs),
     /// Measure where the time of a control step goes on a running instance: each hop, each
     /// stage and end to end (IR frame published -> the motor command it caused applied),
