@@ -48,16 +48,6 @@ impl EstimateLog {
         self.last = Some(*e);
     }
 
-    /// Estimates received.
-    pub fn received(&self) -> u64 {
-        self.received
-    }
-
-    /// The last estimate taken.
-    pub fn last(&self) -> Option<&ObjectEstimate> {
-        self.last.as_ref()
-    }
-
     /// Judges the log against the object's final true pose `truth`, orientation modulo the
     /// object's true symmetry of order `true_order` (0: a disc, whose orientation is not
     /// judged). The judge's call: only it reads the truth.

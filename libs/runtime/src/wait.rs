@@ -243,6 +243,18 @@ mod tests {
     use std::sync::Arc;
     use std::sync::atomic::AtomicU32;
 
+    /// The tests' event service, `wait-test.ev`, opened (or created) on `node`.
+    fn test_event(
+        node: &iceoryx2::node::Node<AgpIpc>,
+    ) -> iceoryx2::service::port_factory::event::PortFactory<AgpIpc> {
+        let name: ServiceName = "wait-test.ev".try_into().expect("service name");
+        node.service_builder(&name)
+            .event()
+            .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
+            .open_or_create()
+            .expect("event service")
+    }
+
     /// Runs `f` with a listener and a notifier of one event service of a private instance,
     /// then checks the instance left no file behind.
     fn with_event(tag: &str, f: impl FnOnce(Listener<AgpIpc>, &Notifier<AgpIpc>)) {
@@ -258,13 +270,7 @@ mod tests {
         let cleanup = Cleanup(&instance);
         {
             let node = instance.node("wait-test", false).expect("node");
-            let name: ServiceName = "wait-test.ev".try_into().expect("service name");
-            let service = node
-                .service_builder(&name)
-                .event()
-                .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
-                .open_or_create()
-                .expect("event service");
+            let service = test_event(&node);
             let listener = service.listener_builder().create().expect("listener");
             let notifier = service.notifier_builder().create().expect("notifier");
             f(listener, &notifier);
@@ -362,17 +368,9 @@ mod tests {
     fn a_notification_from_another_node_wakes_a_block_in_progress() {
         let instance = Instance::new(&format!("wwake{}", std::process::id())).expect("name");
         instance.remove_files().expect("clean start");
-        let name: ServiceName = "wait-test.ev".try_into().expect("service name");
-        let open = |node: &iceoryx2::node::Node<AgpIpc>| {
-            node.service_builder(&name)
-                .event()
-                .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
-                .open_or_create()
-                .expect("event service")
-        };
         let outcome = {
             let node = instance.node("wait-listener", false).expect("node");
-            let service = open(&node);
+            let service = test_event(&node);
             let waiter = Waiter::new(
                 service.listener_builder().create().expect("listener"),
                 WaitStrategy::Block,
@@ -385,12 +383,7 @@ mod tests {
                 let (sent, polls, instance) = (sent.clone(), polls.clone(), instance.clone());
                 std::thread::spawn(move || {
                     let node = instance.node("wait-notifier", false).expect("node");
-                    let service = node
-                        .service_builder(&name)
-                        .event()
-                        .event_id_max_value(crate::EVENT_ID_MAX_VALUE)
-                        .open_or_create()
-                        .expect("event service");
+                    let service = test_event(&node);
                     let notifier = service.notifier_builder().create().expect("notifier");
                     while polls.load(Ordering::SeqCst) < 1 {
                         std::thread::yield_now();

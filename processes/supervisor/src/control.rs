@@ -16,25 +16,41 @@ use crate::goals::GoalReport;
 /// them and refuses to clean.
 const DEAD_CHILDREN_WAIT: Duration = Duration::from_secs(3);
 
-/// The instance a command addresses: `--instance`, else the launch file's.
-pub fn instance_name(instance: Option<&str>, launch: &Path) -> Result<String> {
-    if let Some(name) = instance {
-        Instance::validate_name(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
-        return Ok(name.to_owned());
+/// Which instance a client command addresses (`agp status`, `down`, `swap`, `goal`,
+/// `profile`).
+#[derive(Debug, clap::Args)]
+pub struct InstanceArg {
+    /// The instance (default: the one of LAUNCH).
+    #[arg(long)]
+    pub instance: Option<String>,
+    /// The launch file that names the instance when `--instance` does not.
+    #[arg(long, default_value = "launch.toml")]
+    pub launch: std::path::PathBuf,
+}
+
+impl InstanceArg {
+    /// `--instance`, else the launch file's.
+    pub fn name(&self) -> Result<String> {
+        let launch = self.launch.as_path();
+        if let Some(name) = self.instance.as_deref() {
+            Instance::validate_name(name)
+                .map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+            return Ok(name.to_owned());
+        }
+        if !launch.is_file() {
+            bail!(
+                "no --instance given and no launch file {} to take it from",
+                launch.display()
+            );
+        }
+        let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+        let options = LaunchOptions {
+            instance: None,
+            exe_dir: exe.parent().map(Path::to_path_buf).unwrap_or_default(),
+        };
+        let config = LaunchConfig::load(launch, &options).map_err(|e| anyhow!("{e}"))?;
+        Ok(config.instance)
     }
-    if !launch.is_file() {
-        bail!(
-            "no --instance given and no launch file {} to take it from",
-            launch.display()
-        );
-    }
-    let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
-    let options = LaunchOptions {
-        instance: None,
-        exe_dir: exe.parent().map(Path::to_path_buf).unwrap_or_default(),
-    };
-    let config = LaunchConfig::load(launch, &options).map_err(|e| anyhow!("{e}"))?;
-    Ok(config.instance)
 }
 
 /// One process of `agp status --json`.

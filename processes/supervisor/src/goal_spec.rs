@@ -98,26 +98,6 @@ impl GoalSpec {
         }
         goal
     }
-
-    /// One line for the terminal.
-    pub fn describe(&self) -> String {
-        match self {
-            Self::Place {
-                x_mm,
-                y_mm,
-                theta_deg,
-            } => format!("place at ({x_mm:.0}, {y_mm:.0}) mm, {theta_deg:.0} deg"),
-            Self::Path { points_mm } => {
-                let end = points_mm.last().copied().unwrap_or([0.0; 2]);
-                format!(
-                    "push along a {}-point path to ({:.0}, {:.0}) mm",
-                    points_mm.len(),
-                    end[0],
-                    end[1]
-                )
-            }
-        }
-    }
 }
 
 /// Checks a goal that arrived over the control service (a client other than `agp goal`

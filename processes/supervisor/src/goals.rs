@@ -113,7 +113,10 @@ impl GoalBook {
             self.statuses.pop_front();
         }
         self.statuses.push_back(status);
-        log.note(format_args!("goal {id} queued: {}", describe(&status)));
+        log.note(format_args!(
+            "goal {id} queued: {}",
+            GoalReport::new(&status).what()
+        ));
         self.queued.push_back(goal);
         if self.current.is_none() {
             self.next(log).map_err(|e| format!("{e:#}"))?;
@@ -232,24 +235,6 @@ fn fill_verdict(status: &mut GoalStatus, v: &RunVerdict) {
         v.estimate.final_orientation_error_deg.unwrap_or(f64::NAN);
 }
 
-fn describe(s: &GoalStatus) -> String {
-    if s.kind == TaskKind::Trajectory as u32 {
-        format!(
-            "push along a {}-point path to ({:.0}, {:.0}) mm",
-            s.path_len,
-            s.target.x * 1e3,
-            s.target.y * 1e3
-        )
-    } else {
-        format!(
-            "place at ({:.0}, {:.0}) mm, {:.0} deg",
-            s.target.x * 1e3,
-            s.target.y * 1e3,
-            s.target.theta.to_degrees()
-        )
-    }
-}
-
 fn describe_result(s: &GoalStatus) -> String {
     if s.kind == TaskKind::Trajectory as u32 {
         format!(
@@ -321,9 +306,9 @@ impl GoalReport {
         }
     }
 
-    /// One line for `agp status`.
-    pub fn line(&self) -> String {
-        let what = match self.path_points {
+    /// What the goal asks, in words.
+    pub fn what(&self) -> String {
+        match self.path_points {
             Some(n) => format!(
                 "push along a {n}-point path to ({:.0}, {:.0}) mm",
                 self.x_mm, self.y_mm
@@ -334,7 +319,12 @@ impl GoalReport {
                 self.y_mm,
                 self.theta_deg.unwrap_or(0.0)
             ),
-        };
+        }
+    }
+
+    /// One line for `agp status`.
+    pub fn line(&self) -> String {
+        let what = self.what();
         let result = match (self.success, self.path_points) {
             (None, _) => String::new(),
             (Some(ok), None) => format!(

@@ -106,12 +106,8 @@ struct UpArgs {
 
 #[derive(Debug, clap::Args)]
 struct StatusArgs {
-    /// The instance (default: the one of LAUNCH).
-    #[arg(long)]
-    instance: Option<String>,
-    /// The launch file that names the instance when `--instance` does not.
-    #[arg(long, default_value = "launch.toml")]
-    launch: PathBuf,
+    #[command(flatten)]
+    target: control::InstanceArg,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -126,12 +122,8 @@ struct GoalArgs {
     /// Push the object's centroid along this path: 2 to 32 points X,Y in millimetres.
     #[arg(long, num_args = 2.., value_name = "X,Y", allow_hyphen_values = true)]
     path: Option<Vec<String>>,
-    /// The instance (default: the one of LAUNCH).
-    #[arg(long)]
-    instance: Option<String>,
-    /// The launch file that names the instance when `--instance` does not.
-    #[arg(long, default_value = "launch.toml")]
-    launch: PathBuf,
+    #[command(flatten)]
+    target: control::InstanceArg,
     /// Print JSON: the goal's id and the goals so far.
     #[arg(long)]
     json: bool,
@@ -150,12 +142,8 @@ struct SwapArgs {
     /// Seconds the new process may take to become ready, and then to drive.
     #[arg(long, default_value_t = 10.0)]
     timeout_s: f64,
-    /// The instance (default: the one of LAUNCH).
-    #[arg(long)]
-    instance: Option<String>,
-    /// The launch file that names the instance when `--instance` does not.
-    #[arg(long, default_value = "launch.toml")]
-    launch: PathBuf,
+    #[command(flatten)]
+    target: control::InstanceArg,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -166,12 +154,8 @@ struct SwapArgs {
 
 #[derive(Debug, clap::Args)]
 struct DownArgs {
-    /// The instance (default: the one of LAUNCH).
-    #[arg(long)]
-    instance: Option<String>,
-    /// The launch file that names the instance when `--instance` does not.
-    #[arg(long, default_value = "launch.toml")]
-    launch: PathBuf,
+    #[command(flatten)]
+    target: control::InstanceArg,
     /// Give up waiting for the stop after this many seconds.
     #[arg(long, default_value_t = 60)]
     timeout_s: u64,
@@ -398,7 +382,7 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
 }
 
 fn status(args: &StatusArgs) -> Result<u8> {
-    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let name = args.target.name()?;
     let r = control_client::ask(&name, agp_shared_types::ControlKind::Status)?;
     let report = control::StatusReport::new(&name, &r);
     if args.json {
@@ -419,7 +403,7 @@ fn goal(args: &GoalArgs) -> Result<u8> {
         (None, None) => unreachable!("clap requires --place or --path"),
     }
     .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let name = args.target.name()?;
     let mut request = agp_shared_types::ControlRequest::new(agp_shared_types::ControlKind::Goal);
     request.goal = spec.to_goal();
     let r = control_client::ask_with(&name, request, control_client::ANSWER_TIMEOUT)?;
@@ -443,10 +427,14 @@ fn goal(args: &GoalArgs) -> Result<u8> {
             .iter()
             .filter(|g| g.id < r.goal_id && g.state != "done")
             .count();
+        let what = report
+            .goals
+            .iter()
+            .find(|g| g.id == r.goal_id)
+            .map_or_else(String::new, goals::GoalReport::what);
         println!(
-            "goal {} queued on `{name}`: {} ({})",
+            "goal {} queued on `{name}`: {what} ({})",
             r.goal_id,
-            spec.describe(),
             match ahead {
                 0 => "pursued now".to_owned(),
                 1 => "after 1 goal".to_owned(),
@@ -464,7 +452,7 @@ fn swap(args: &SwapArgs) -> Result<u8> {
             args.timeout_s
         );
     }
-    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let name = args.target.name()?;
     if let Some(path) = &args.watch {
         return watch(args, &name, path);
     }
@@ -644,7 +632,7 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
 }
 
 fn down(args: &DownArgs) -> Result<u8> {
-    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let name = args.target.name()?;
     match control::down(&name, std::time::Duration::from_secs(args.timeout_s))? {
         control::DownOutcome::Stopped => println!("agp: instance `{name}` is down"),
         control::DownOutcome::Cleaned { removed } => println!(

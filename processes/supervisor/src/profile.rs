@@ -65,12 +65,8 @@ pub const FLOOR_PONG_SUBCOMMAND: &str = "profile-floor-pong";
 /// stage, end to end, and the floor (a bare iceoryx2 hop waiting the same way).
 #[derive(Debug, clap::Args)]
 pub struct ProfileArgs {
-    /// The instance (default: the one of LAUNCH).
-    #[arg(long)]
-    pub instance: Option<String>,
-    /// The launch file that names the instance when `--instance` does not.
-    #[arg(long, default_value = "launch.toml")]
-    pub launch: PathBuf,
+    #[command(flatten)]
+    pub target: control::InstanceArg,
     /// How long to sample the pipeline, seconds.
     #[arg(long, default_value_t = 5.0)]
     pub seconds: f64,
@@ -865,7 +861,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
             args.floor_seconds
         );
     }
-    let name = control::instance_name(args.instance.as_deref(), &args.launch)?;
+    let name = args.target.name()?;
     let instance = Instance::new(&name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
     if !InstanceLock::is_held(&instance) {
         bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");

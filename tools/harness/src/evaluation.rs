@@ -273,11 +273,6 @@ impl EstimateRecorder {
     }
 }
 
-/// The task as the planner published it, in the planner library's terms.
-pub fn task_of(msg: &agp_shared_types::Task) -> Option<Task> {
-    Task::from_message(msg)
-}
-
 /// How an `agp up` run ended, judged by ground truth.
 pub struct RunVerdict {
     pub task: Task,
@@ -398,7 +393,7 @@ fn watch(
                 truth.restart()?;
                 estimates.restart();
             }
-            *task = task_of(&t);
+            *task = Task::from_message(&t);
             truth.follow_path(match task {
                 Some(Task::Trajectory { path }) => Some(path),
                 _ => None,

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use agp_planning::{EpisodeConfig, EpisodeEnd, EpisodeResult, Evaluation, PlannerKind, Task};
+use agp_planning::{EpisodeConfig, EpisodeEnd, EpisodeResult, PlannerKind, Task};
 use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::Pose2;
 use agp_world::Scenario;
@@ -190,14 +190,8 @@ impl PipelineBench {
             .ok_or_else(|| anyhow!("no ground truth arrived during the episode"))?;
         self.truth_gaps += self.truth.gaps;
         self.estimates.drain(true);
-        let order = self.scenario.object.shape.symmetry_order();
-        let evaluation = Evaluation::judge(
-            task,
-            truth.object,
-            order,
-            config,
-            std::mem::take(&mut self.truth.samples),
-        );
+        // Judged as an in-process episode is: the final true pose, the recorded ones and
+        // the estimates.
         Ok(EpisodeResult {
             planner,
             end: planner_view.end,
@@ -206,12 +200,13 @@ impl PipelineBench {
             sim_time_s: planner_view.sim_time_s,
             wall_time_s: wall.elapsed().as_secs_f64(),
             final_estimate: planner_view.final_estimate,
-            evaluation: Some(evaluation),
-            samples: Vec::new(),
+            evaluation: None,
+            samples: std::mem::take(&mut self.truth.samples),
             final_truth: Some(truth.object),
             estimates: self.estimates.log,
-            estimate_verdict: Some(self.estimates.log.judged(truth.object, order)),
-        })
+            estimate_verdict: None,
+        }
+        .judged(task, self.scenario.object.shape.symmetry_order(), config))
     }
 
     /// Stops every process and removes every file of the instance.
