@@ -1,6 +1,9 @@
 """ctypes mirrors of agp's shared-types payloads (shared-types/src/payloads.rs), for the stock
 `iceoryx2` Python package (0.10.0). Type names and layouts must match the Rust
-`#[type_name(...)]` and `#[repr(C)]` exactly, or iceoryx2 refuses to open the service."""
+`#[type_name(...)]` and `#[repr(C)]` exactly, or iceoryx2 refuses to open the service.
+
+The one home of these mirrors: `planner.py` beside it imports them, and so can any other
+stock Python client (put this folder on `PYTHONPATH`)."""
 import ctypes
 import os
 
@@ -96,6 +99,82 @@ class ObjectEstimate(ctypes.Structure):
         return "agp::ObjectEstimate.v3"
 
 
+class LearnEvent(ctypes.Structure):
+    """What the planner tells the estimator (`agp/learn_events`). A task planner sends the
+    four `TASK_*` kinds below; the learning protocol's kinds are not mirrored here."""
+
+    _fields_ = [
+        ("seq", ctypes.c_uint64),
+        ("session", ctypes.c_uint64),
+        ("kind", ctypes.c_uint32),
+        ("index", ctypes.c_uint32),
+        ("total", ctypes.c_uint32),
+        ("flag", ctypes.c_uint32),
+        ("step", ctypes.c_uint64),
+        ("alpha_deg", ctypes.c_double),
+        ("angle_rad", ctypes.c_double),
+        ("object", Pose2),
+        ("ir_sample", ctypes.c_uint64),
+        ("ir_raw", ctypes.c_float * IR_SENSOR_COUNT),
+        ("odometry", Pose2),
+        ("contact", ctypes.c_double * 2),
+        ("scale", ctypes.c_double),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "agp::LearnEvent.v3"
+
+
+# `LearnEventKind` (payloads.rs): the kinds a task planner sends.
+TASK_CIRCLE_BEGIN = 12
+TASK_CIRCLE_END = 13
+TASK_PUSH_BEGIN = 14
+TASK_PUSH_END = 15
+
+MAX_PATH_POINTS = 32
+TASK_KIND_PLACE = 2
+
+
+class Task(ctypes.Structure):
+    """The task under way (`agp/task`, latched): the planner publishes it, the judge of
+    `agp up` scores the run against it."""
+
+    _fields_ = [
+        ("kind", ctypes.c_uint32),
+        ("path_len", ctypes.c_uint32),
+        ("goal", Pose2),
+        ("tolerance_m", ctypes.c_double),
+        ("tolerance_rad", ctypes.c_double),
+        ("path", (ctypes.c_double * 2) * MAX_PATH_POINTS),
+        ("max_pushes", ctypes.c_uint32),
+        ("_pad", ctypes.c_uint32),
+        ("seed", ctypes.c_uint64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "agp::Task.v1"
+
+
+# `stage` (payloads.rs): indices of `TimingHeader.stamps_ns`.
+FRAME_PUBLISHED = 0
+ESTIMATOR_RECEIVED = 1
+ESTIMATE_PUBLISHED = 2
+PLANNER_RECEIVED = 3
+COMMAND_PUBLISHED = 4
+
+# `GridKind` (payloads.rs): which component a grid holds.
+GRID_SHAPE = 0
+GRID_POSITION_X = 1
+GRID_POSITION_Y = 2
+GRID_PUSH_WEIGHT = 5
+GRID_ROTATION = 6
+GRID_DISPLACEMENT_SQ_MEAN = 7
+GRID_ROTATION_SQ_MEAN = 8
+GRIDS_PER_ALPHA = 11
+
+
 class GridHeader(ctypes.Structure):
     _fields_ = [
         ("seq", ctypes.c_uint64),
@@ -134,7 +213,9 @@ assert ctypes.sizeof(MotorCommand) == 72 + 40 == 112
 assert ctypes.sizeof(ObjectEstimate) == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 8 + 8 == 256
 assert ctypes.sizeof(GridHeader) == 8 + 4 * 4 + 8 * 8 == 88
 assert ctypes.sizeof(GradientGrid) == 88 + 4 * GRID_CELLS
-for t in (IrFrame, MotorCommand, ObjectEstimate, GradientGrid):
+assert ctypes.sizeof(LearnEvent) == 8 * 2 + 4 * 4 + 8 * 3 + 24 + 8 + 32 + 24 + 16 + 8 == 168
+assert ctypes.sizeof(Task) == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16
+for t in (IrFrame, MotorCommand, ObjectEstimate, GradientGrid, LearnEvent, Task):
     assert ctypes.alignment(t) == 8
 
 
