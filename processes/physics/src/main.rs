@@ -478,8 +478,10 @@ impl Runner {
     fn lockstep_loop(&mut self, waiter: &Waiter, idle_timeout_s: u64) -> Result<()> {
         let idle_limit = (idle_timeout_s > 0).then(|| Duration::from_secs(idle_timeout_s));
         // A subscriber that connects while physics waits gets the latest frame from history
-        // only when the publisher updates its connections: do so at this period while idle.
-        let slice = Duration::from_millis(20);
+        // only when the publisher updates its connections: do so at this period while idle,
+        // and wake the readers for it (a new planner waits for that frame once per episode
+        // of a benchmark: the period is its latency).
+        let slice = Duration::from_millis(5);
         let mut idle_since = Instant::now();
         // A command of a newer epoch than the active one, for the step it names: kept until
         // its epoch becomes active (a hot swap's flip), or dropped when the step passes.
@@ -553,6 +555,7 @@ impl Runner {
                     }
                     let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
                     self.update_connections()?;
+                    let _ = self.ports.frames_ev.notify();
                     continue;
                 }
                 WaitOutcome::Ready(None) => {

@@ -12,9 +12,10 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use crate::learn_bench::{
-    LearnBenchConfig, LearnStage, MIN_EVAL_PUSHES, ObjectReport, PAPER_TRIANGLE_MAX_ROTATION_DEG,
-    check_object, run_object,
+    LearnBenchConfig, LearnBenchError, MIN_EVAL_PUSHES, ObjectReport,
+    PAPER_TRIANGLE_MAX_ROTATION_DEG, check_object, run_object,
 };
+use crate::side_by_side::side_by_side;
 use agp_world::{BUILTIN_NAMES, Scenario};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -169,22 +170,15 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
 
     let total: usize = jobs.len() * cfg.progress_total();
     let bar = progress_bar(total as u64);
+    bar.set_prefix("learning");
+    // The objects are independent (each its own simulator, seeded alike): they learn side
+    // by side on the machine's cores, and are reported in the order given.
+    let learned = learn_objects(&jobs, &cfg, &bar);
     let mut objects = Map::new();
     let mut missed = Vec::new();
-    for (i, job) in jobs.iter().enumerate() {
-        let offset = (i * cfg.progress_total()) as u64;
-        bar.set_prefix(job.scenario.name.clone());
-        let started = Instant::now();
-        let report = run_object(&job.scenario, &cfg, &mut |p| {
-            bar.set_message(match p.stage {
-                LearnStage::ShapeCircling => "shape circled",
-                LearnStage::Trials => "trials",
-                LearnStage::Evaluation => "unseen pushes",
-            });
-            bar.set_position(offset + p.done as u64);
-        })
-        .with_context(|| format!("cannot learn `{}`", job.scenario.name))?;
-        let wall_s = started.elapsed().as_secs_f64();
+    for (job, outcome) in jobs.iter().zip(learned) {
+        let (report, wall_s) =
+            outcome.with_context(|| format!("cannot learn `{}`", job.scenario.name))?;
         let (ag_path, plot_path) = write_files(args, job, &cfg, &report)?;
         bar.suspend(|| {
             human.say(&format!(
@@ -245,6 +239,24 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         }
     }
     Ok(doc)
+}
+
+/// Learns every job's object, side by side on the machine's cores; each object's report
+/// with its own wall time (seconds), in the order of `jobs`.
+fn learn_objects(
+    jobs: &[Job],
+    cfg: &LearnBenchConfig,
+    bar: &ProgressBar,
+) -> Vec<Result<(ObjectReport, f64), LearnBenchError>> {
+    side_by_side(jobs, |job| {
+        let started = Instant::now();
+        let mut shown = 0;
+        let report = run_object(&job.scenario, cfg, &mut |p| {
+            bar.inc((p.done as u64).saturating_sub(shown));
+            shown = shown.max(p.done as u64);
+        })?;
+        Ok((report, started.elapsed().as_secs_f64()))
+    })
 }
 
 /// The scenarios, all loaded and checked before anything runs.

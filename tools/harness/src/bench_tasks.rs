@@ -22,6 +22,7 @@ use anyhow::{Context, Result, bail};
 
 use crate::bench_learn;
 use crate::pipeline_bench::PipelineBench;
+use crate::side_by_side::side_by_side;
 use glam::DVec2;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::coord::Shift;
@@ -243,6 +244,9 @@ impl<'a> Runner<'a> {
                 scenario_arg,
                 ag,
                 seed,
+                // Instance names are short (iceoryx2's socket paths): three letters tell
+                // the planners apart.
+                planner.name().get(..3).unwrap_or(planner.name()),
             )?))
         }
     }
@@ -284,6 +288,15 @@ impl<'a> Runner<'a> {
             }
         }
     }
+}
+
+/// The progress bar's label for planners that run side by side.
+fn prefix_of(planners: &[PlannerKind]) -> String {
+    planners
+        .iter()
+        .map(|p| p.name())
+        .collect::<Vec<_>>()
+        .join("+")
 }
 
 /// The evaluation of an episode both runners judged.
@@ -354,9 +367,8 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
         eprintln!("{ORACLE_NOTE}");
     }
     let bar = progress((goals.len() * planners.len()) as u64);
-    let mut results: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
-    for &planner in &planners {
-        bar.set_prefix(planner.name());
+    bar.set_prefix(prefix_of(&planners));
+    let runs = side_by_side(&planners, |&planner| {
         let mut runner = Runner::start(
             args.in_process,
             &args.scenario,
@@ -384,8 +396,12 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
         let finished = runner.finish();
         episodes?;
         finished?;
-        results.insert(planner, runs);
-    }
+        Ok(runs)
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>>>()?;
+    let results: BTreeMap<PlannerKind, Vec<EpisodeResult>> =
+        planners.iter().copied().zip(runs).collect();
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
 
@@ -530,10 +546,9 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
         scenario.name
     );
     let bar = progress(planners.len() as u64);
+    bar.set_prefix(prefix_of(&planners));
     let task = Task::Trajectory { path: path.clone() };
-    let mut runs = Vec::new();
-    for planner in planners {
-        bar.set_prefix(planner.name());
+    let runs = side_by_side(&planners, |&planner| {
         let mut runner = Runner::start(
             args.in_process,
             &args.scenario,
@@ -549,9 +564,11 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
         let finished = runner.finish();
         let r = r?;
         finished?;
-        runs.push(r);
         bar.inc(1);
-    }
+        Ok(r)
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>>>()?;
     bar.finish_and_clear();
     let wall_time_s = wall.elapsed().as_secs_f64();
 

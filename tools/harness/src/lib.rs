@@ -4,7 +4,8 @@
 //! process by `in_process`), the judge that scores a task by ground truth (`evaluation`),
 //! `agp probe` (`probe`), the learning benchmark against the physics library
 //! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
-//! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`).
+//! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`), and
+//! `side_by_side`, which spreads independent benchmark work over the cores.
 //!
 //! Ground truth is read here and in the physics library only (and by the `oracle`).
 
@@ -19,6 +20,7 @@ pub mod math;
 pub mod pipeline;
 pub mod pipeline_bench;
 pub mod probe;
+pub mod side_by_side;
 pub mod task_goals;
 
 pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode};

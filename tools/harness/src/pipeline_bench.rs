@@ -1,4 +1,4 @@
-//! Benchmark episodes over the real pipeline: a private instance (`bench-<pid>`) with
+//! Benchmark episodes over the real pipeline: a private instance (`bench-<pid>-<tag>`) with
 //! lockstep `agp-physics`, `agp-estimator` serving an AG file's gradients over the `grids`
 //! topic, and one `agp-planner` process per episode. The benchmark plays the experimenter
 //! and the judge: it puts the object and the robot back at the scenario's start before each
@@ -44,10 +44,11 @@ pub struct PipelineBench {
 
 impl PipelineBench {
     /// Starts physics (seeded with `seed`) and the estimator, serving `ag`'s gradients if
-    /// given.
-    pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64) -> Result<Self> {
+    /// given, under the instance `bench-<pid>-<tag>` (`tag`: lowercase letters, digits,
+    /// `-`, `_`; one per pipeline running at once).
+    pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64, tag: &str) -> Result<Self> {
         let scenario = Scenario::resolve(scenario_arg)?;
-        let name = format!("bench-{}", std::process::id());
+        let name = format!("bench-{}-{tag}", std::process::id());
         let instance = Instance::new(&name).map_err(|e| anyhow!("instance `{name}`: {e}"))?;
         // A bench of the same pid that died hard may have left files: they are ours.
         instance
