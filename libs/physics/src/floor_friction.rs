@@ -71,6 +71,20 @@ impl FloorFriction {
         self.mu
     }
 
+    /// Largest friction torque about the centroid, N m: the footprint turning on the spot,
+    /// every cell resisting with mu * load at its distance from the centroid.
+    pub fn max_torque(&self) -> f64 {
+        self.cells
+            .iter()
+            .map(|c| self.mu * c.load * c.centre.length())
+            .sum()
+    }
+
+    /// Largest friction force, N: mu times the whole load.
+    pub fn max_force(&self) -> f64 {
+        self.mu * self.cells.iter().map(|c| c.load).sum::<f64>()
+    }
+
     /// Friction force (world frame, N) and torque (N m) on an object moving with linear
     /// velocity `v` (world frame, at the centroid) and angular velocity `omega`, heading
     /// `theta`. Each cell resists its own sliding velocity `v + omega x r` with `mu * load`.

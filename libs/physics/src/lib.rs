@@ -2,6 +2,7 @@
 
 mod convex_pieces;
 mod drive;
+pub mod finite_force;
 mod floor_friction;
 mod sensors;
 mod sim;
@@ -10,4 +11,4 @@ pub use convex_pieces::convex_pieces;
 pub use drive::drive_arc;
 pub use floor_friction::{FloorFriction, FootprintCell, FrictionOutcome, G};
 pub use sensors::{IR_COUNT, SensorState};
-pub use sim::{CONTACT_DISTANCE, FloorModel, Sim, SimBuildError, SimConfig};
+pub use sim::{CONTACT_DISTANCE, ContactImpulse, FloorModel, Sim, SimBuildError, SimConfig};

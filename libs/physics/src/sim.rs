@@ -1,15 +1,16 @@
 use agp_shared_types::angle::wrap_angle;
-use agp_world::{ObjectShape, Pose, RobotDescription, Scenario};
+use agp_world::{ObjectShape, Pose, RobotDescription, RobotDrive, Scenario};
 use glam::DVec2;
 use rapier2d::math::{Pose as RPose, Vector as RVec};
 use rapier2d::prelude::{
-    CoefficientCombineRule, ColliderBuilder, MassProperties, PhysicsWorld, Ray, RigidBodyBuilder,
-    RigidBodyHandle, SharedShape,
+    CoefficientCombineRule, ColliderBuilder, ColliderHandle, MassProperties, PhysicsWorld, Ray,
+    RigidBodyBuilder, RigidBodyHandle, SharedShape,
 };
 
 use crate::convex_pieces::convex_pieces;
 use crate::drive::drive_arc;
-use crate::floor_friction::FloorFriction;
+use crate::finite_force::{FloorHold, WheelDrive};
+use crate::floor_friction::{FloorFriction, FrictionOutcome};
 use crate::sensors::{IR_COUNT, SensorModel, SensorState};
 
 /// Scale of the world for rapier's tolerances (its `length_unit`): our objects are a few
@@ -22,6 +23,23 @@ const LENGTH_UNIT: f32 = 0.01;
 /// Robot and object closer than this (m) count as touching: above the contact solver's
 /// slop (0.05 mm) and its rounding, far below anything an IR reading could resolve.
 pub const CONTACT_DISTANCE: f64 = 1e-4;
+
+/// The robot-object contact as rapier's solver left it after the last step: ground truth
+/// for tests and experiments (the robot has no contact sensor).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactImpulse {
+    /// Unit normal from the robot's centre towards the object (world frame).
+    pub normal: DVec2,
+    /// Where the robot's body touches the object: its centre plus its radius along
+    /// `normal` (world frame), m.
+    pub point: DVec2,
+    /// Impulse along the normal over the last step, N s, summed over the contact points
+    /// (and over the object's convex pieces): the push.
+    pub normal_impulse: f64,
+    /// Friction impulse across the normal over the last step, N s: the sum of the contact
+    /// points' magnitudes, so `tangent_impulse <= mu * normal_impulse` is Coulomb's cone.
+    pub tangent_impulse: f64,
+}
 
 /// How the floor resists an object's motion.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,7 +115,12 @@ pub enum SimBuildError {
 /// rate with rapier2d (zero gravity: seen from above, the floor acts through friction).
 ///
 /// # The robot's body
-/// The robot is a position-based kinematic rapier body: each step its pose follows the
+/// The scenario's `[robot] drive` chooses it. `"finite-force"` makes it a dynamic body
+/// pulled by two stepper wheels of bounded force (see [`crate::finite_force`]'s model:
+/// it stalls against a heavy object and its wheels slip). The default, `"kinematic"`, is
+/// described here.
+///
+/// The kinematic robot is a position-based kinematic rapier body: each step its pose follows the
 /// exact differential-drive arc of the (clamped) wheel speeds, kept in f64 by the
 /// simulator, and rapier derives the body's velocity from it for the contact solver. This
 /// is the stepper-motor E-puck: velocity-controlled wheels that reach their commanded
@@ -129,6 +152,13 @@ pub struct Sim {
     robot_pose: Pose,
     wheels: (f64, f64),
     sensors: SensorModel,
+    /// The finite-force drive's wheels; `None` for the kinematic robot.
+    wheel_drive: Option<WheelDrive>,
+    /// The finite-force drive's static floor friction on the object at rest (with the
+    /// Coulomb floor only).
+    floor_hold: Option<FloorHold>,
+    /// The robot's collider, for its contact with the object.
+    robot_collider: ColliderHandle,
 }
 
 fn rpose(p: Pose) -> RPose {
@@ -157,6 +187,18 @@ impl Sim {
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(SimBuildError::Robot(name));
+            }
+        }
+        if scenario.robot.drive == RobotDrive::FiniteForce {
+            for (name, v) in [
+                ("mass", robot.mass),
+                ("wheel_radius", robot.wheel_radius),
+                ("wheel_friction", robot.wheel_friction),
+                ("wheel_torque", robot.wheel_torque),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(SimBuildError::Robot(name));
+                }
             }
         }
         if robot.ir_sensors.len() != IR_COUNT {
@@ -189,10 +231,15 @@ impl Sim {
         // Recycled contacts may be stale by the recycle distance: keep every step exact.
         params.contact_recycling = false;
 
-        let robot_body = world.insert_body(
-            RigidBodyBuilder::kinematic_position_based().pose(rpose(scenario.robot.start)),
-        );
-        world.insert_collider(
+        let finite_force = scenario.robot.drive == RobotDrive::FiniteForce;
+        let robot_body = world.insert_body(if finite_force {
+            RigidBodyBuilder::dynamic()
+                .pose(rpose(scenario.robot.start))
+                .can_sleep(false)
+        } else {
+            RigidBodyBuilder::kinematic_position_based().pose(rpose(scenario.robot.start))
+        });
+        let robot_collider = world.insert_collider(
             ColliderBuilder::ball(robot.body_radius as f32)
                 .mass(robot.mass as f32)
                 .friction(obj.contact_friction as f32)
@@ -245,6 +292,22 @@ impl Sim {
             FloorModel::Damping { .. } => None,
         };
 
+        let (wheel_drive, floor_hold) = if finite_force {
+            let drive = WheelDrive::new(&mut world, robot_body, robot, scenario.robot.start);
+            let hold = floor.as_ref().map(|f| {
+                FloorHold::new(
+                    &mut world,
+                    object_body,
+                    obj.start,
+                    f.max_force(),
+                    f.max_torque(),
+                )
+            });
+            (Some(drive), hold)
+        } else {
+            (None, None)
+        };
+
         let mut sim = Sim {
             scenario: scenario.clone(),
             robot: robot.clone(),
@@ -261,6 +324,9 @@ impl Sim {
             robot_pose: scenario.robot.start,
             wheels: (0.0, 0.0),
             sensors: SensorModel::new(robot, &scenario.robot, config.seed),
+            wheel_drive,
+            floor_hold,
+            robot_collider,
         };
         let (robot_pose, object_pose) = (sim.robot_pose, sim.object_pose());
         let (shape, range) = (&sim.object_shape, sim.sensors.max_range());
@@ -291,11 +357,22 @@ impl Sim {
         };
         let (l, r) = (clamp(left_mps), clamp(right_mps));
         self.wheels = (l, r);
+        // Odometry counts these commanded travels, whatever the body does.
         let travel = (l * self.dt, r * self.dt);
-        self.robot_pose = drive_arc(self.robot_pose, travel.0, travel.1, self.robot.axle_length);
-        let next = rpose(self.robot_pose);
-        if let Some(body) = self.world.bodies.get_mut(self.robot_body) {
-            body.set_next_kinematic_position(next);
+        if let Some(drive) = &self.wheel_drive {
+            let omega = self
+                .world
+                .bodies
+                .get(self.robot_body)
+                .map_or(0.0, |b| b.angvel() as f64);
+            drive.command(&mut self.world, self.robot_pose, omega, self.dt, (l, r));
+        } else {
+            self.robot_pose =
+                drive_arc(self.robot_pose, travel.0, travel.1, self.robot.axle_length);
+            let next = rpose(self.robot_pose);
+            if let Some(body) = self.world.bodies.get_mut(self.robot_body) {
+                body.set_next_kinematic_position(next);
+            }
         }
         if let Some(floor) = &self.floor
             && let Some(body) = self.world.bodies.get_mut(self.object_body)
@@ -304,7 +381,7 @@ impl Sim {
             let mut v = DVec2::new(lv.x as f64, lv.y as f64);
             let mut w = body.angvel() as f64;
             let theta = body.rotation().angle() as f64;
-            floor.apply(
+            let outcome = floor.apply(
                 &mut v,
                 &mut w,
                 theta,
@@ -314,6 +391,12 @@ impl Sim {
             );
             body.set_linvel(RVec::new(v.x as f32, v.y as f32), false);
             body.set_angvel(w as f32, false);
+            if let Some(hold) = &self.floor_hold {
+                let p = body.position();
+                let object = Pose::new(p.translation.x as f64, p.translation.y as f64, theta);
+                let at_rest = matches!(outcome, FrictionOutcome::AtRest | FrictionOutcome::Stopped);
+                hold.command(&mut self.world, object, self.robot_pose.theta, at_rest);
+            }
         }
         travel
     }
@@ -321,6 +404,18 @@ impl Sim {
     /// Counts the step and takes the samples that fall due.
     fn after_rapier(&mut self, travel: (f64, f64)) {
         self.step_count += 1;
+        if let Some(drive) = &mut self.wheel_drive
+            && let Some(b) = self.world.bodies.get(self.robot_body)
+        {
+            let p = b.position();
+            let before = self.robot_pose;
+            self.robot_pose = Pose::new(
+                p.translation.x as f64,
+                p.translation.y as f64,
+                p.rotation.angle() as f64,
+            );
+            drive.account(before, self.robot_pose, travel);
+        }
         let (robot_pose, object_pose) = (self.robot_pose, self.object_pose());
         let (shape, range) = (&self.object_shape, self.sensors.max_range());
         self.sensors
@@ -375,6 +470,48 @@ impl Sim {
         }
     }
 
+    /// The robot-object contact of the last step, if the solver held one (see
+    /// [`ContactImpulse`]). Walks rapier's contact pairs: for tests and experiments, not
+    /// for a hot loop.
+    pub fn contact_impulse(&self) -> Option<ContactImpulse> {
+        let mut out: Option<ContactImpulse> = None;
+        for pair in self
+            .world
+            .narrow_phase
+            .contact_pairs_with(self.robot_collider)
+        {
+            if !pair.has_any_active_contact() {
+                continue;
+            }
+            let flip = if pair.collider1 == self.robot_collider {
+                1.0
+            } else {
+                -1.0
+            };
+            for m in pair.manifolds() {
+                let (n, t) = m.points.iter().fold((0.0, 0.0), |(n, t), p| {
+                    (
+                        n + p.data.impulse as f64,
+                        t + (p.data.tangent_impulse.x as f64).abs(),
+                    )
+                });
+                if n <= 0.0 {
+                    continue;
+                }
+                let normal = DVec2::new(m.data.normal.x as f64, m.data.normal.y as f64) * flip;
+                let c = out.get_or_insert(ContactImpulse {
+                    normal,
+                    point: self.robot_pose.position() + normal * self.robot.body_radius,
+                    normal_impulse: 0.0,
+                    tangent_impulse: 0.0,
+                });
+                c.normal_impulse += n;
+                c.tangent_impulse += t;
+            }
+        }
+        out
+    }
+
     /// Sets the object's velocity (world frame, m/s and rad/s), as a kick would: for
     /// experiments and tests of the floor friction.
     pub fn set_object_velocity(&mut self, v: DVec2, omega: f64) {
@@ -401,9 +538,48 @@ impl Sim {
         self.sensors.state()
     }
 
-    /// The wheel speeds applied at the last step, after clamping (m/s).
+    /// The wheel speeds commanded at the last step, after clamping (m/s): what the
+    /// steppers turn at and odometry counts. The finite-force robot's body may move slower
+    /// (see [`Sim::wheel_slip`]).
     pub fn wheel_speeds(&self) -> (f64, f64) {
         self.wheels
+    }
+
+    /// How physics moves the robot (the scenario's `[robot] drive`).
+    pub fn drive(&self) -> RobotDrive {
+        if self.wheel_drive.is_some() {
+            RobotDrive::FiniteForce
+        } else {
+            RobotDrive::Kinematic
+        }
+    }
+
+    /// Slip of the (left, right) wheel since the last reset (or construction), m: the
+    /// commanded travel, which odometry counts, minus the travel of the wheel's floor
+    /// contact point along the robot's heading. Positive when the wheel spun forwards
+    /// faster than the robot moved. Always (0, 0) for the kinematic robot.
+    pub fn wheel_slip(&self) -> (f64, f64) {
+        self.wheel_drive
+            .as_ref()
+            .map(WheelDrive::slip)
+            .unwrap_or((0.0, 0.0))
+    }
+
+    /// The finite-force drive's force limits per wheel, N: (pull along the rolling
+    /// direction, grip across it); `None` for the kinematic robot.
+    pub fn wheel_force_limits(&self) -> Option<(f64, f64)> {
+        self.wheel_drive.as_ref().map(WheelDrive::limits)
+    }
+
+    /// Velocity of the robot's centre (world frame, m/s) and its angular velocity (rad/s).
+    pub fn robot_velocity(&self) -> (DVec2, f64) {
+        match self.world.bodies.get(self.robot_body) {
+            Some(b) => {
+                let v = b.linvel();
+                (DVec2::new(v.x as f64, v.y as f64), b.angvel() as f64)
+            }
+            None => (DVec2::ZERO, 0.0),
+        }
     }
 
     /// Puts the object and the robot at the given poses at rest, sets the odometry to the
@@ -415,6 +591,13 @@ impl Sim {
         self.wheels = (0.0, 0.0);
         if let Some(b) = self.world.bodies.get_mut(self.robot_body) {
             b.set_position(rpose(robot), true);
+            if self.wheel_drive.is_some() {
+                b.set_linvel(RVec::ZERO, true);
+                b.set_angvel(0.0, true);
+            }
+        }
+        if let Some(drive) = &mut self.wheel_drive {
+            drive.reset();
         }
         if let Some(b) = self.world.bodies.get_mut(self.object_body) {
             b.set_position(rpose(object), true);
@@ -538,8 +721,13 @@ mod tests {
     #[test]
     fn a_repeated_push_allocates_nothing() {
         alloc_count::enable();
-        for name in agp_world::BUILTIN_NAMES {
-            let scenario = Scenario::builtin(name).expect("built-in");
+        let drives = [RobotDrive::Kinematic, RobotDrive::FiniteForce];
+        for (name, drive) in agp_world::BUILTIN_NAMES
+            .into_iter()
+            .flat_map(|n| drives.map(|d| (n, d)))
+        {
+            let mut scenario = Scenario::builtin(name).expect("built-in");
+            scenario.robot.drive = drive;
             let mut sim = Sim::new(&scenario, &RobotDescription::epuck(), SimConfig::default())
                 .expect("builds");
             // Three passes of the same trial from the same start: drive up to the object,
@@ -580,7 +768,7 @@ mod tests {
                 }
             }
             eprintln!(
-                "{name}: rapier allocated {rapier} times in a pass with {contact_changes} contact changes"
+                "{name} ({drive:?}): rapier allocated {rapier} times in a pass with {contact_changes} contact changes"
             );
             assert_eq!(
                 own, 0,
@@ -590,11 +778,11 @@ mod tests {
                 contact_changes >= 2,
                 "the {name}: the pass began and ended no contact ({contact_changes} changes)"
             );
-            // Our patched rapier (vendor/rapier2d/PATCHES.md) and one collider per convex
-            // piece.
+            // Our patched rapier (vendor/rapier2d/PATCHES.md; item 6 for the finite-force
+            // drive's joints) and one collider per convex piece.
             assert_eq!(
                 rapier, 0,
-                "the {name}: rapier allocated {rapier} times in the third pass"
+                "the {name} ({drive:?}): rapier allocated {rapier} times in the third pass"
             );
         }
     }

@@ -17,11 +17,15 @@ pub use ir_geometry::{
     BORDER_MAX_SIGMA, border_range, ir_border_point, ir_point_robot, mean_ir_vector, to_frame,
 };
 pub use rng::Rng;
-pub use robot::{IrSensor, ResponseCurve, RobotDescription, RobotLoadError};
+pub use robot::{
+    IrSensor, ResponseCurve, RobotDescription, RobotLoadError, WHEEL_FRICTION_RANGE,
+    WHEEL_TORQUE_MNM_RANGE,
+};
 pub use scenario::{
     ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Experimenter, Localization, MAX_POLYGON_VERTICES,
     MAX_POSE_ANGLE_DEG, MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape,
-    ObjectSpec, Pose, RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind, TaskSpec,
+    ObjectSpec, Pose, RobotDrive, RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind,
+    TaskSpec,
 };
 
 /// 1-based line number of byte offset `offset` in `text`.

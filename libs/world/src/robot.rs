@@ -2,6 +2,7 @@ use std::path::Path;
 
 use glam::DVec2;
 use serde::Deserialize;
+use toml::Spanned;
 
 /// The built-in robot description (the E-puck of ../shared/spec/robot-and-world.md).
 const EPUCK_TOML: &str = include_str!("../data/epuck.toml");
@@ -165,6 +166,13 @@ pub struct RobotDescription {
     pub ir_rate_hz: f64,
     pub ir_sensors: Vec<IrSensor>,
     pub response: ResponseCurve,
+    /// Coulomb coefficient between the tyres and the floor (the finite-force drive's
+    /// traction: at most `wheel_friction * mass * G` for the two wheels together).
+    pub wheel_friction: f64,
+    /// Largest torque a wheel's stepper delivers at the wheel before it loses steps
+    /// (pull-out torque after the gearbox), N m. The finite-force drive's motor limit: at
+    /// most `wheel_torque / wheel_radius` of pull per wheel.
+    pub wheel_torque: f64,
 }
 
 /// Why a robot description could not be loaded.
@@ -195,9 +203,18 @@ struct RobotFile {
     mass_kg: f64,
     max_wheel_speed_mm_s: f64,
     ir_rate_hz: f64,
+    wheel_friction: Spanned<f64>,
+    #[serde(rename = "wheel_torque_mNm")]
+    wheel_torque_mnm: Spanned<f64>,
     ir_sensors: Vec<SensorFile>,
     response: ResponseFile,
 }
+
+/// Bounds of the finite-force drive's figures: a tyre's friction coefficient (rubber on a
+/// floor is 0.5-1; 2 is beyond any plausible tyre) and a wheel's torque, mN m (the E-puck's
+/// is an estimated 25; 1000 would lift a 20 mm wheel's robot off the floor many times).
+pub const WHEEL_FRICTION_RANGE: (f64, f64) = (0.01, 2.0);
+pub const WHEEL_TORQUE_MNM_RANGE: (f64, f64) = (0.01, 1000.0);
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -262,6 +279,30 @@ impl RobotDescription {
                 file.ir_sensors.len()
             )));
         }
+        let at_line = |key: &str, v: &Spanned<f64>, (lo, hi): (f64, f64), unit: &str| {
+            let x = *v.get_ref();
+            if x.is_finite() && x >= lo && x <= hi {
+                Ok(x)
+            } else {
+                Err(RobotLoadError::Parse {
+                    path: origin.to_owned(),
+                    line: crate::line_of(text, v.span().start),
+                    message: format!("`{key}` must be a number from {lo} to {hi}{unit}, got {x}"),
+                })
+            }
+        };
+        let wheel_friction = at_line(
+            "wheel_friction",
+            &file.wheel_friction,
+            WHEEL_FRICTION_RANGE,
+            "",
+        )?;
+        let wheel_torque_mnm = at_line(
+            "wheel_torque_mNm",
+            &file.wheel_torque_mnm,
+            WHEEL_TORQUE_MNM_RANGE,
+            " mN m",
+        )?;
         let response = ResponseCurve::new(
             file.response
                 .rows
@@ -288,6 +329,8 @@ impl RobotDescription {
                 })
                 .collect(),
             response,
+            wheel_friction,
+            wheel_torque: wheel_torque_mnm * 1e-3,
         })
     }
 
@@ -347,5 +390,54 @@ mod tests {
         let e = RobotDescription::parse(&text, "robot.toml").unwrap_err();
         let msg = e.to_string();
         assert!(msg.starts_with("robot.toml:9:"), "{msg}");
+    }
+
+    #[test]
+    fn the_builtin_epuck_carries_its_traction_and_motor_figures() {
+        let r = RobotDescription::epuck();
+        assert_eq!(r.wheel_friction, 0.8);
+        assert!((r.wheel_torque - 0.025).abs() < 1e-15);
+        // Traction binds before the motor: mu m g / 2 per wheel below torque / radius.
+        assert!(r.wheel_friction * r.mass * 9.81 / 2.0 < r.wheel_torque / r.wheel_radius);
+    }
+
+    #[test]
+    fn a_traction_figure_out_of_range_names_its_line() {
+        for (from, to, key) in [
+            (
+                "wheel_friction = 0.8",
+                "wheel_friction = -0.8",
+                "`wheel_friction`",
+            ),
+            (
+                "wheel_friction = 0.8",
+                "wheel_friction = nan",
+                "`wheel_friction`",
+            ),
+            (
+                "wheel_torque_mNm = 25.0",
+                "wheel_torque_mNm = 1e9",
+                "`wheel_torque_mNm`",
+            ),
+        ] {
+            let text = EPUCK_TOML.replace(from, to);
+            let line = text
+                .lines()
+                .position(|l| l.starts_with(to))
+                .expect("replaced")
+                + 1;
+            let msg = RobotDescription::parse(&text, "robot.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(
+                msg.starts_with(&format!("robot.toml:{line}: {key} must be a number from")),
+                "{msg}"
+            );
+        }
+        let missing = EPUCK_TOML.replace("wheel_torque_mNm = 25.0", "");
+        let msg = RobotDescription::parse(&missing, "robot.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("wheel_torque_mNm"), "{msg}");
     }
 }

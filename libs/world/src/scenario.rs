@@ -104,9 +104,35 @@ pub struct Localization {
     pub noise_rad: f64,
 }
 
+/// How physics moves the robot (a scenario's `[robot] drive`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum RobotDrive {
+    /// `"kinematic"` (the default): the body follows the commanded wheel speeds exactly,
+    /// with unbounded force; it never stalls and its wheels never slip.
+    #[default]
+    Kinematic,
+    /// `"finite-force"`: a dynamic body driven by two stepper wheels, each pulling at most
+    /// the smaller of its traction (`wheel_friction` times its share of the weight) and its
+    /// motor's (`wheel_torque / wheel_radius`) of the robot file: a heavy object stalls it,
+    /// its wheels slip and odometry, which counts commanded steps, drifts.
+    FiniteForce,
+}
+
+impl RobotDrive {
+    /// The name a scenario file gives it.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Kinematic => "kinematic",
+            Self::FiniteForce => "finite-force",
+        }
+    }
+}
+
 /// The robot's start and the noise of its senses.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotSetup {
+    /// How physics moves the robot's body.
+    pub drive: RobotDrive,
     pub start: Pose,
     /// Relative standard deviation of each wheel's travel per odometry update.
     pub odometry_noise: f64,
@@ -281,6 +307,8 @@ struct PoseFile {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RobotFile {
+    #[serde(default)]
+    drive: Option<Spanned<String>>,
     #[serde(default)]
     start: Option<Spanned<PoseFile>>,
     #[serde(default)]
@@ -486,12 +514,28 @@ impl Scenario {
 
         let robot = match &file.robot {
             None => RobotSetup {
+                drive: RobotDrive::default(),
                 start: DEFAULT_ROBOT_START,
                 odometry_noise: DEFAULT_ODOMETRY_NOISE,
                 localization: Some(DEFAULT_LOCALIZATION),
                 ir_noise_scale: 1.0,
             },
             Some(r) => RobotSetup {
+                drive: match &r.drive {
+                    None => RobotDrive::default(),
+                    Some(d) => match d.get_ref().as_str() {
+                        "kinematic" => RobotDrive::Kinematic,
+                        "finite-force" => RobotDrive::FiniteForce,
+                        other => {
+                            return Err(err(
+                                d.span(),
+                                format!(
+                                    "`drive` is `{other}`; expected \"kinematic\" or \"finite-force\""
+                                ),
+                            ));
+                        }
+                    },
+                },
                 start: match &r.start {
                     Some(p) => pose(p, "start", &err)?,
                     None => DEFAULT_ROBOT_START,
@@ -896,6 +940,37 @@ mod tests {
                 .shape
                 .symmetry_order(),
             0
+        );
+    }
+
+    #[test]
+    fn the_drive_is_kinematic_unless_the_scenario_asks_for_finite_force() {
+        for name in BUILTIN_NAMES {
+            let s = Scenario::builtin(name).unwrap();
+            assert_eq!(s.robot.drive, RobotDrive::Kinematic);
+        }
+        let base = include_str!("../scenarios/triangle.toml");
+        let text = base.replace("[robot]\n", "[robot]\ndrive = \"finite-force\"\n");
+        let s = Scenario::parse(&text, "ff.toml").unwrap();
+        assert_eq!(s.robot.drive, RobotDrive::FiniteForce);
+        let text = base.replace("[robot]\n", "[robot]\ndrive = \"kinematic\"\n");
+        assert_eq!(
+            Scenario::parse(&text, "k.toml").unwrap().robot.drive,
+            RobotDrive::Kinematic
+        );
+    }
+
+    #[test]
+    fn an_unknown_drive_is_refused_with_its_line() {
+        let base = include_str!("../scenarios/triangle.toml");
+        let text = base.replace("[robot]\n", "[robot]\ndrive = \"dynamic\"\n");
+        let line = text.lines().position(|l| l.starts_with("drive")).unwrap() + 1;
+        let msg = Scenario::parse(&text, "bad.toml").unwrap_err().to_string();
+        assert_eq!(
+            msg,
+            format!(
+                "bad.toml:{line}: `drive` is `dynamic`; expected \"kinematic\" or \"finite-force\""
+            )
         );
     }
 

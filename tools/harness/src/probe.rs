@@ -72,6 +72,14 @@ pub struct ProbeResult {
     pub dy_mm: f64,
     /// Counter-clockwise positive, in (-180, 180].
     pub rotation_deg: f64,
+    /// How physics moved the robot: `kinematic` or `finite-force` (the scenario's
+    /// `[robot] drive`).
+    pub drive: String,
+    /// Slip of the [left, right] wheel over the whole probe (mm): the travel the steppers
+    /// were commanded, which odometry counts, minus the ground travel of the wheel's
+    /// contact point along the robot's heading (from the true poses). 0 for the kinematic
+    /// robot; for the finite-force robot, what a stalled push adds to the odometry's drift.
+    pub wheel_slip_mm: [f64; 2],
 }
 
 /// Runs the probe; `Ok(None)` when it was interrupted (Ctrl-C) before it finished.
@@ -158,13 +166,19 @@ fn drive(
     let dt = 1.0 / RATE_HZ;
     let v = args.speed_mm_s * 1e-3;
 
+    let mut slip = [0.0f64; 2];
+    let half_axle = robot.axle_length / 2.0;
     macro_rules! step {
         ($l:expr, $r:expr) => {
+            let before = driver.truth().robot;
             match driver.step($l, $r) {
                 Ok(_) => {}
                 Err(DriveError::Shutdown) => return Ok(None),
                 Err(e) => return Err(e).context("physics stopped answering"),
             }
+            let ground = wheel_ground_travel(before, driver.truth().robot, half_axle);
+            slip[0] += $l * dt - ground[0];
+            slip[1] += $r * dt - ground[1];
         };
     }
 
@@ -205,7 +219,21 @@ fn drive(
         dx_mm: (end.x - obj.x) * 1e3,
         dy_mm: (end.y - obj.y) * 1e3,
         rotation_deg: wrap_angle(end.theta - obj.theta).to_degrees(),
+        drive: scenario.robot.drive.as_str().to_owned(),
+        wheel_slip_mm: slip.map(|s| s * 1e3),
     }))
+}
+
+/// Ground travel of the [left, right] wheel's contact point (at +-`half_axle` across the
+/// heading) from pose `a` to `b`, along the mean heading, m.
+fn wheel_ground_travel(a: Pose2, b: Pose2, half_axle: f64) -> [f64; 2] {
+    let mid = a.theta + wrap_angle(b.theta - a.theta) / 2.0;
+    let (c, s) = (mid.cos(), mid.sin());
+    [half_axle, -half_axle].map(|y| {
+        let p = |q: Pose2| (q.x - y * q.theta.sin(), q.y + y * q.theta.cos());
+        let (pa, pb) = (p(a), p(b));
+        (pb.0 - pa.0) * c + (pb.1 - pa.1) * s
+    })
 }
 
 fn report(r: &ProbeResult, json: Option<&Path>) -> Result<()> {
@@ -231,6 +259,10 @@ fn report(r: &ProbeResult, json: Option<&Path>) -> Result<()> {
     println!(
         "  rotated     {:+.1} deg (counter-clockwise positive)",
         r.rotation_deg
+    );
+    println!(
+        "  wheel slip  left {:.1} mm, right {:.1} mm ({} robot)",
+        r.wheel_slip_mm[0], r.wheel_slip_mm[1], r.drive
     );
     if let Some(path) = json {
         write_atomically(path, text.as_bytes())?;

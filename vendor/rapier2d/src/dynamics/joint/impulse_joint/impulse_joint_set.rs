@@ -72,6 +72,10 @@ pub struct ImpulseJointSet {
     /// identical, so the caller's previous output is reused untouched.
     #[cfg_attr(feature = "serde-serialize", serde(skip))]
     selection_epochs: Option<(u32, u32)>,
+    /// agp patch: the candidates of [`Self::select_active_interactions`], kept between
+    /// calls so that a selection allocates nothing once warm.
+    #[cfg_attr(feature = "serde-serialize", serde(skip))]
+    candidates_workspace: Vec<u32>,
 }
 
 impl ImpulseJointSet {
@@ -88,6 +92,7 @@ impl ImpulseJointSet {
             all_joints_modified: false,
             assembly_epoch: 0,
             selection_epochs: None,
+            candidates_workspace: Vec::new(),
         }
     }
 
@@ -574,7 +579,9 @@ impl ImpulseJointSet {
         // Only iterate joints adjacent to an active body instead of the whole graph: any joint
         // selected below has at least one awake dynamic/kinematic body, so the neighborhood walk
         // is exhaustive — and much smaller when most of the scene is asleep.
-        let mut candidates: Vec<u32> = Vec::new();
+        // agp patch: the workspace kept on the set, not a fresh `Vec` per call.
+        let mut candidates = std::mem::take(&mut self.candidates_workspace);
+        candidates.clear();
 
         // When most bodies are awake, walking the graph adjacency (pointer-chasing) and sorting
         // costs more than the linear edge scan it replaces — just visit every joint and let the
@@ -622,6 +629,7 @@ impl ImpulseJointSet {
                 out.push(i);
             }
         }
+        self.candidates_workspace = candidates;
     }
 
     /// Removes a joint from the world.
