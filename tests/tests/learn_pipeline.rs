@@ -92,11 +92,7 @@ fn collect_grids(
     let instance = Instance::new(instance).expect("a valid name");
     let node = instance.node("test-grids", false).expect("a node");
     let topic = instance.grids(&node).expect("the grids topic");
-    let subscriber = topic
-        .data
-        .subscriber_builder()
-        .create()
-        .expect("a grid subscriber");
+    let subscriber = topic.subscriber().create().expect("a grid subscriber");
     subscribed.send(()).expect("the test waits");
     let border = triangle();
     let n = border.len();

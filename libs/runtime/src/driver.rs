@@ -169,20 +169,14 @@ impl LockstepDriver {
         let resets = instance.resets(&node).map_err(port("resets"))?;
         let truth = if ground_truth {
             let t = instance.ground_truth(&node).map_err(port("ground truth"))?;
-            Some(
-                t.data
-                    .subscriber_builder()
-                    .create()
-                    .map_err(port("ground truth"))?,
-            )
+            Some(t.subscriber().create().map_err(port("ground truth"))?)
         } else {
             None
         };
         let epochs = instance
             .active_epoch(&node)
             .map_err(port("active epoch"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(port("active epoch subscriber"))?;
         let listener = frames
@@ -192,8 +186,7 @@ impl LockstepDriver {
             .map_err(port("IR frame listener"))?;
         let mut driver = Self {
             frames: frames
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(port("IR frame subscriber"))?,
             truth,

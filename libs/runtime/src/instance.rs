@@ -8,6 +8,7 @@ use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::subscriber::PortFactorySubscriber;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use agp_shared_types::{
@@ -431,6 +432,7 @@ impl Qos {
             buffer: 64,
             max_publishers: 4,
             max_subscribers: 8,
+            tap: 1024,
         }
     }
 }
@@ -456,10 +458,21 @@ pub fn instance_files_in(dir: &Path, prefix: &str) -> Vec<PathBuf> {
 #[derive(Debug, Clone, Copy)]
 struct Qos {
     history: usize,
+    /// The buffer of the pipeline's own subscribers ([`Topic::subscriber`]).
     buffer: usize,
     max_publishers: usize,
     max_subscribers: usize,
+    /// The deepest buffer a subscriber may ask for: a tap that must miss nothing at full
+    /// lockstep speed, the recorder, asks for this much ([`TAP_DEPTH`]) on the topics it
+    /// records; the pipeline's subscribers keep `buffer`.
+    tap: usize,
 }
+
+/// The buffer of a tap on a stream or command topic: 4096 messages, 6.4 s at 640 Hz, so a
+/// recorder held off the cores for seconds still loses nothing. iceoryx2 sizes each
+/// publisher's segment for its subscribers' largest possible buffers: frames
+/// about 9 MB (8 subscribers of 272 bytes), estimates 8 MB, each command publisher 2 MB.
+pub const TAP_DEPTH: usize = 4096;
 
 impl Qos {
     /// A stream of state (frames, estimates): the latest matters; a new reader gets it at once.
@@ -469,6 +482,7 @@ impl Qos {
             buffer: 4,
             max_publishers: 4,
             max_subscribers: 8,
+            tap: TAP_DEPTH,
         }
     }
 
@@ -480,6 +494,7 @@ impl Qos {
         Self {
             buffer: 8192,
             max_subscribers: 6,
+            tap: 8192,
             ..Self::stream()
         }
     }
@@ -501,6 +516,7 @@ impl Qos {
             buffer: 16,
             max_publishers: 6,
             max_subscribers: 4,
+            tap: TAP_DEPTH,
         }
     }
 
@@ -519,6 +535,7 @@ impl Qos {
             buffer: set,
             max_publishers: 4,
             max_subscribers: 4,
+            tap: set,
         }
     }
 
@@ -528,6 +545,7 @@ impl Qos {
         Self {
             history: 1,
             buffer: 2,
+            tap: 2,
             ..Self::commands()
         }
     }
@@ -539,6 +557,7 @@ impl Qos {
             buffer: 2,
             max_publishers: 4,
             max_subscribers: 8,
+            tap: 2,
         }
     }
 }
@@ -567,6 +586,17 @@ impl std::error::Error for OpenError {}
 pub struct Topic<T: std::fmt::Debug + ZeroCopySend + 'static> {
     pub data: publish_subscribe::PortFactory<AgpIpc, T, ()>,
     pub event: event::PortFactory<AgpIpc>,
+    /// The buffer of the pipeline's subscribers on this topic.
+    buffer: usize,
+}
+
+impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
+    /// A subscriber of the pipeline's own: its buffer is the topic's (a stream keeps the
+    /// latest few, commands their 16). `data.subscriber_builder()` without a buffer size
+    /// gives a tap the deepest buffer the service allows (the recorder's).
+    pub fn subscriber(&self) -> PortFactorySubscriber<'_, AgpIpc, T, ()> {
+        self.data.subscriber_builder().buffer_size(self.buffer)
+    }
 }
 
 impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
@@ -586,7 +616,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
                 .service_builder(&data_name)
                 .publish_subscribe::<T>()
                 .history_size(qos.history)
-                .subscriber_max_buffer_size(qos.buffer.max(qos.history))
+                .subscriber_max_buffer_size(qos.buffer.max(qos.history).max(qos.tap))
                 .max_publishers(qos.max_publishers)
                 .max_subscribers(qos.max_subscribers)
                 .max_nodes(16)
@@ -619,7 +649,11 @@ impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
                 Err(e) => return Err(OpenError::Event(e)),
             }
         };
-        Ok(Self { data, event })
+        Ok(Self {
+            data,
+            event,
+            buffer: qos.buffer.max(qos.history),
+        })
     }
 }
 

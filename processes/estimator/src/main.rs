@@ -273,13 +273,11 @@ impl Estimator {
         };
         let state = State {
             frames: frames
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(open_err("the IR frame subscriber"))?,
             events: events
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(open_err("the learn event subscriber"))?,
             estimates: estimates
@@ -346,6 +344,7 @@ impl Estimator {
     /// Connects subscribers that came since the last send: a publisher hands its history
     /// (the latest estimate, the grids) to a new subscriber only then.
     fn update_connections(&self) -> Result<()> {
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         self.state
             .estimates
             .update_connections()
@@ -362,6 +361,8 @@ impl Estimator {
     /// Notifies every topic's event, with nothing new sent: a reader that just connected
     /// polls, and finds the history [`Self::update_connections`] handed it.
     fn wake_readers(&self) {
+        // A notifier connects to listeners that came since its last notification here.
+        let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let _ = self.state.estimates_wake.notify();
         let _ = self.state.reports_wake.notify();
         let _ = self.grids_wake.notify();

@@ -188,18 +188,15 @@ impl Ports {
                 .create()
                 .map_err(port_err("ground truth notifier"))?,
             commands: commands
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(port_err("motor command subscriber"))?,
             resets: resets
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(port_err("reset subscriber"))?,
             epochs: epochs
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(port_err("active epoch subscriber"))?,
             commands_service: commands.data,

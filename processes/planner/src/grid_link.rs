@@ -44,8 +44,7 @@ impl GridLink {
             .map_err(open_err("the grids node"))?;
         let topic = instance.grids(&node).map_err(open_err("the grids topic"))?;
         let subscriber = topic
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(open_err("the grid subscriber"))?;
         let listener = topic
@@ -56,8 +55,7 @@ impl GridLink {
         let estimates = instance
             .estimates(&node)
             .map_err(open_err("the estimates"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(open_err("the estimate subscriber"))?;
         Ok(Self {

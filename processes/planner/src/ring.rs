@@ -124,8 +124,7 @@ impl EstimatorLink {
                 .create()
                 .map_err(open_err("the learn event notifier"))?,
             estimates: estimates
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(open_err("the estimate subscriber"))?,
             estimates_waiter: Waiter::new(
@@ -137,8 +136,7 @@ impl EstimatorLink {
                 strategy,
             ),
             reports: reports
-                .data
-                .subscriber_builder()
+                .subscriber()
                 .create()
                 .map_err(open_err("the report subscriber"))?,
             reports_waiter: Waiter::new(

@@ -37,8 +37,7 @@ pub fn run(
     let goals = instance
         .goal(&node)
         .map_err(|e| anyhow!("cannot open the goal topic: {e:?}"))?
-        .data
-        .subscriber_builder()
+        .subscriber()
         .create()
         .map_err(|e| anyhow!("cannot subscribe to the goals: {e:?}"))?;
     let client = ControlClient::open(instance, &node, settings.timeout)

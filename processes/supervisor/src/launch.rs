@@ -20,6 +20,14 @@
 //! stop_grace_ms = 3000          # SIGTERM -> SIGKILL delay when stopping; default 3000
 //! ```
 //!
+//! `view = true` (top level) also runs `agp view` on the instance, a Foxglove WebSocket
+//! server on port 8765 (`view = PORT` for another port, 0 for any free one), as a process
+//! named `view` after the others.
+//!
+//! `record = "FILE.mcap"` (top level; relative: to this file) also records every topic of
+//! the instance into FILE with `agp record`, as a process named `recorder` started before
+//! the others (so it has subscribed when physics publishes), stopped with them.
+//!
 //! Every number has a limit, named when it is passed: `rate_hz` from 1 to 100000
 //! (`RATE_HZ_RANGE`), `max_restarts` at most 1000, `backoff_ms` and `stop_grace_ms` at
 //! most 60000, at most 32 processes of at most 256 arguments of 4096 bytes. The file and its
@@ -81,6 +89,9 @@ pub struct LaunchConfig {
     pub clock: ClockConfig,
     /// The processes, in the order they start.
     pub processes: Vec<ProcessConfig>,
+    /// `record = "FILE"`: the recording's absolute path (its `recorder` process is the
+    /// first of `processes`).
+    pub record: Option<PathBuf>,
 }
 
 /// Where the scenario comes from.
@@ -383,6 +394,16 @@ struct RawLaunch {
     clock: Option<RawClock>,
     #[serde(default)]
     process: Vec<Spanned<RawProcess>>,
+    record: Option<Spanned<String>>,
+    view: Option<Spanned<RawView>>,
+}
+
+/// `view = true | false | PORT`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawView {
+    On(bool),
+    Port(i64),
 }
 
 #[derive(Debug, Deserialize)]
@@ -562,6 +583,44 @@ impl LaunchConfig {
             processes.push(resolve_process(&mut check, p, &base, &options.exe_dir));
         }
 
+        if let Some(view) = &raw.view
+            && let Some(p) = view_process(&mut check, view, &instance, &options.exe_dir)
+        {
+            if let Some(&first_line) = first_lines.get(&p.name) {
+                check.fault_at(
+                    view,
+                    LaunchFaultKind::DuplicateProcess {
+                        name: p.name.clone(),
+                        first_line,
+                    },
+                );
+            }
+            processes.push(p);
+        }
+
+        let mut record = None;
+        if let Some(raw_record) = &raw.record {
+            let p = record_process(
+                &mut check,
+                raw_record,
+                file,
+                &base,
+                &processes,
+                &options.exe_dir,
+            );
+            if let Some(&first_line) = first_lines.get(&p.name) {
+                check.fault_at(
+                    raw_record,
+                    LaunchFaultKind::DuplicateProcess {
+                        name: p.name.clone(),
+                        first_line,
+                    },
+                );
+            }
+            record = Some(base.join(raw_record.as_ref()));
+            processes.insert(0, p);
+        }
+
         if !check.faults.is_empty() {
             check.faults.sort_by_key(|f| f.line.unwrap_or(0));
             return Err(refuse(check.faults));
@@ -573,6 +632,7 @@ impl LaunchConfig {
             results,
             clock,
             processes,
+            record,
         })
     }
 
@@ -723,6 +783,53 @@ fn resolve_clock(check: &mut Checker<'_>, raw: Option<&RawClock>) -> ClockConfig
     clock
 }
 
+/// The process `view = true` (or `view = PORT`) adds: `agp view --instance NAME --port
+/// PORT`, restarted on failure; `None` for `view = false`.
+fn view_process(
+    check: &mut Checker<'_>,
+    raw: &Spanned<RawView>,
+    instance: &str,
+    exe_dir: &Path,
+) -> Option<ProcessConfig> {
+    let port = match raw.as_ref() {
+        RawView::On(false) => return None,
+        RawView::On(true) => agp_view::DEFAULT_PORT,
+        RawView::Port(p) => match u16::try_from(*p) {
+            Ok(p) => p,
+            Err(_) => {
+                check.fault_at(
+                    raw,
+                    LaunchFaultKind::OutOfBounds {
+                        key: "view",
+                        limit: "true, false or a port from 0 to 65535".to_owned(),
+                        value: p.to_string(),
+                    },
+                );
+                return None;
+            }
+        },
+    };
+    Some(ProcessConfig {
+        name: "view".to_owned(),
+        exec: exe_dir.join("agp"),
+        args: vec![
+            "view".to_owned(),
+            "--instance".to_owned(),
+            instance.to_owned(),
+            "--port".to_owned(),
+            port.to_string(),
+        ],
+        env: BTreeMap::new(),
+        restart: RestartConfig {
+            policy: RestartPolicy::OnFailure,
+            ..RestartConfig::default()
+        },
+        ends_run: false,
+        stop_grace: DEFAULT_STOP_GRACE,
+        line: check.line_of(&raw.span()),
+    })
+}
+
 fn resolve_process(
     check: &mut Checker<'_>,
     p: &RawProcess,
@@ -859,6 +966,80 @@ fn resolve_process(
     }
 }
 
+/// The process `record = "FILE"` adds: `agp record --launch LAUNCH [--seed N] FILE`
+/// (instance, scenario, clock and rate come from its context variables), never restarted,
+/// given 10 s to finish the file when stopped. The seed is physics's `--seed` or
+/// `AGP_SEED`, when the file gives one.
+fn record_process(
+    check: &mut Checker<'_>,
+    raw: &Spanned<String>,
+    file: &Path,
+    base: &Path,
+    processes: &[ProcessConfig],
+    exe_dir: &Path,
+) -> ProcessConfig {
+    let out = raw.as_ref();
+    if out.is_empty() || out.contains('\0') || out.len() > MAX_ARG_BYTES {
+        check.fault_at(
+            raw,
+            LaunchFaultKind::OutOfBounds {
+                key: "record",
+                limit: format!("a file name of 1 to {MAX_ARG_BYTES} bytes without NUL"),
+                value: format!("{} bytes", out.len()),
+            },
+        );
+    }
+    let exec = exe_dir.join("agp");
+    if !is_executable_file(&exec) {
+        check.fault_at(
+            raw,
+            LaunchFaultKind::MissingExecutable {
+                process: "recorder".to_owned(),
+                exec: "agp".to_owned(),
+                looked_at: exec.clone(),
+            },
+        );
+    }
+    let physics = processes
+        .iter()
+        .find(|p| p.exec.file_name().is_some_and(|n| n == "agp-physics"));
+    let seed = physics.and_then(|p| {
+        p.args
+            .windows(2)
+            .find(|w| w[0] == "--seed")
+            .map(|w| w[1].clone())
+            .or_else(|| {
+                p.args
+                    .iter()
+                    .find_map(|a| a.strip_prefix("--seed=").map(str::to_owned))
+            })
+            .or_else(|| p.env.get("AGP_SEED").cloned())
+    });
+    let launch = std::path::absolute(file).unwrap_or_else(|_| file.to_path_buf());
+    let mut args = vec![
+        "record".to_owned(),
+        "--launch".to_owned(),
+        launch.display().to_string(),
+    ];
+    if let Some(seed) = seed {
+        args.extend(["--seed".to_owned(), seed]);
+    }
+    args.push(base.join(out).display().to_string());
+    ProcessConfig {
+        line: check.line_of(&raw.span()),
+        name: "recorder".to_owned(),
+        exec,
+        args,
+        env: BTreeMap::new(),
+        restart: RestartConfig {
+            policy: RestartPolicy::Never,
+            ..RestartConfig::default()
+        },
+        ends_run: false,
+        stop_grace: Duration::from_secs(10),
+    }
+}
+
 fn check_delay(check: &mut Checker<'_>, ms: &Spanned<u64>, key: &'static str) {
     if *ms.as_ref() > MAX_DELAY_MS {
         check.fault_at(
@@ -929,6 +1110,54 @@ mod tests {
             let fault = err.faults.into_iter().next().expect("one fault");
             (fault.line, shown, fault.kind)
         }
+    }
+
+    #[test]
+    fn a_record_key_starts_a_recorder_first_with_the_launch_file_and_physicss_seed() {
+        let f = Fixture::new();
+        for exe in ["bin/agp", "bin/agp-physics"] {
+            let path = f.dir.path().join(exe);
+            std::fs::write(&path, "#!/bin/sh\n").expect("write");
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+        }
+        let text = "instance = \"rec\"\nscenario = \"triangle\"\nrecord = \"out/run.mcap\"\n\
+                    [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--seed\", \"9\"]\n";
+        let config = f.parse(text).expect("a valid file");
+        let rec = &config.processes[0];
+        assert_eq!(rec.name, "recorder");
+        assert_eq!(rec.exec, f.dir.path().join("bin/agp"));
+        assert_eq!(rec.restart.policy, RestartPolicy::Never);
+        let out = f.dir.path().join("out/run.mcap");
+        assert_eq!(config.record.as_deref(), Some(out.as_path()));
+        let launch = std::path::absolute(f.file()).expect("absolute");
+        let expected = [
+            "record".to_owned(),
+            "--launch".to_owned(),
+            launch.display().to_string(),
+            "--seed".to_owned(),
+            "9".to_owned(),
+            out.display().to_string(),
+        ];
+        assert_eq!(rec.args, expected);
+        assert_eq!(config.processes[1].name, "physics");
+    }
+
+    #[test]
+    fn a_record_key_beside_a_process_named_recorder_is_refused() {
+        let f = Fixture::new();
+        std::fs::write(f.dir.path().join("bin/agp"), "#!/bin/sh\n").expect("write");
+        std::fs::set_permissions(
+            f.dir.path().join("bin/agp"),
+            std::fs::Permissions::from_mode(0o755),
+        )
+        .expect("chmod");
+        let text = GOOD.replace("name = \"planner\"", "name = \"recorder\"");
+        let (line, shown, _) = f.fault(&format!("record = \"run.mcap\"\n{text}"));
+        assert_eq!(line, Some(1));
+        assert!(
+            shown.contains("duplicate process name `recorder`"),
+            "{shown}"
+        );
     }
 
     const GOOD: &str = r#"
@@ -1344,5 +1573,37 @@ stop_grace_ms = 500
         assert_eq!(r.delay_before(1), Duration::from_millis(200));
         assert_eq!(r.delay_before(3), Duration::from_millis(800));
         assert_eq!(r.delay_before(40), MAX_RESTART_DELAY);
+    }
+
+    #[test]
+    fn view_true_adds_agp_view_on_the_instance_after_the_other_processes() {
+        let f = Fixture::new();
+        let c = f.parse(&format!("view = true\n{GOOD}")).expect("valid");
+        let view = c.processes.last().expect("a process");
+        assert_eq!(c.processes.len(), 3);
+        assert_eq!(view.name, "view");
+        assert_eq!(view.exec, f.options().exe_dir.join("agp"));
+        assert_eq!(
+            view.args,
+            ["view", "--instance", "t-launch", "--port", "8765"]
+        );
+        assert_eq!(view.restart.policy, RestartPolicy::OnFailure);
+        assert!(!view.ends_run);
+        assert_eq!(view.line, 1);
+        let c = f.parse(&format!("view = 0\n{GOOD}")).expect("valid");
+        assert_eq!(c.processes[2].args[4], "0");
+        let c = f.parse(&format!("view = false\n{GOOD}")).expect("valid");
+        assert_eq!(c.processes.len(), 2);
+    }
+
+    #[test]
+    fn a_view_port_out_of_range_is_refused_on_its_line() {
+        let f = Fixture::new();
+        let (line, shown, _) = f.fault(&format!("view = 70000\n{GOOD}"));
+        assert_eq!(line, Some(1));
+        assert!(
+            shown.ends_with("`view` must be true, false or a port from 0 to 65535, got 70000"),
+            "{shown}"
+        );
     }
 }

@@ -7,8 +7,11 @@ mod control_plane;
 mod goals;
 mod profile;
 mod rates;
+mod record;
+mod replay;
 mod signals;
 mod up;
+mod view;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -74,6 +77,31 @@ enum Cmd {
     ///
     /// Example: agp profile --seconds 5 --json profile.json --plot profile.svg
     Profile(profile::ProfileArgs),
+    /// Serve a live view of a running instance to Foxglove (a Foxglove WebSocket server):
+    /// the robot, the object as the estimator believes it with its uncertainty, the goal,
+    /// the IR rays and the affordance-gradient layer. With FILE.mcap it serves a recording
+    /// instead, paced by its log times. `view = true` in launch.toml runs it with the run.
+    ///
+    /// Example: agp view --instance live     (then in Foxglove: Open connection, ws://localhost:8765)
+    ///
+    /// Example: agp view run.mcap --speed 2
+    View(view::ViewArgs),
+    /// Record every topic of a running instance (ground truth excepted) into an MCAP file:
+    /// one channel per iceoryx2 topic, each message the payload's raw bytes, each schema a
+    /// text of its layout. The recorder is a subscriber of its own: the pipeline never waits
+    /// for it; what it could not take is counted and said. A launch file's `record =
+    /// "FILE"` records a run from its start.
+    ///
+    /// Example: agp record --instance live --seconds 10 live.mcap
+    Record(record::RecordArgs),
+    /// Play a recorded lockstep run back into physics (its scenario, seed and clock, from
+    /// the recording) and check it comes out the same: every recorded frame to the bit, and
+    /// the object's final true pose.
+    ///
+    /// Example: agp replay run.mcap --json replay.json
+    Replay(replay::ReplayArgs),
+    #[command(name = "replay-driver", hide = true)]
+    ReplayDriver(replay::DriverArgs),
     #[command(name = "profile-floor-pong", hide = true)]
     ProfileFloorPong(profile::FloorPongArgs),
     /// Measure what the simulated world does.
@@ -230,6 +258,10 @@ fn main() -> ExitCode {
         Cmd::Swap(args) => swap(args),
         Cmd::Goal(args) => goal(args),
         Cmd::Profile(args) => profile::run(args),
+        Cmd::Record(args) => record::run(args),
+        Cmd::Replay(args) => replay::run(args),
+        Cmd::ReplayDriver(args) => replay::drive(args),
+        Cmd::View(args) => view::run(args),
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
         Cmd::Bench {
             what: BenchCmd::Learn(args),

@@ -379,8 +379,7 @@ fn sample_pipeline(instance: &Instance, seconds: f64) -> Result<Sampling> {
         .ir_frames(&node)
         .context("cannot open the IR frames")?;
     let subscriber = frames
-        .data
-        .subscriber_builder()
+        .subscriber()
         .create()
         .map_err(|e| anyhow!("cannot subscribe to the IR frames: {e:?}"))?;
     let mut s = Sampling {

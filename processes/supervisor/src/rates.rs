@@ -86,15 +86,13 @@ impl MessageRates {
         let frames = instance
             .ir_frames(node)
             .map_err(|e| anyhow!("cannot open the IR frames: {e}"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(|e| anyhow!("cannot subscribe to the IR frames: {e:?}"))?;
         let commands = instance
             .motor_commands(node)
             .map_err(|e| anyhow!("cannot open the motor commands: {e}"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(|e| anyhow!("cannot subscribe to the motor commands: {e:?}"))?;
         Ok(Self {

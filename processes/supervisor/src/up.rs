@@ -3,7 +3,7 @@
 
 use std::io::Write;
 use std::os::unix::process::ExitStatusExt;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
@@ -451,7 +451,17 @@ fn run(
         if let Some(s) = signals::first() {
             return RunEnd::Signal(s);
         }
+        let recording = config
+            .record
+            .as_deref()
+            .filter(|_| slot.process.name == RECORDER);
+        let before = recording.and_then(file_stamp);
         if let Err(end) = slot.start(config, log, None, 0) {
+            return end;
+        }
+        if let Some(path) = recording
+            && let Some(end) = await_recorder(slot, path, before, log)
+        {
             return end;
         }
     }
@@ -474,6 +484,53 @@ fn run(
         control.poll(slots, log);
         // A swap's handover waits on this loop: look more often while one is under way.
         std::thread::sleep(if control.swapping() { SWAP_POLL } else { POLL });
+    }
+}
+
+/// The process `record = "FILE"` adds (launch.rs).
+const RECORDER: &str = "recorder";
+/// How long the processes after the recorder wait for it to be subscribed.
+const RECORDER_READY: Duration = Duration::from_secs(10);
+
+/// When `path` was last written, if it exists.
+fn file_stamp(path: &Path) -> Option<std::time::SystemTime> {
+    std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}
+
+/// Waits until the recorder has created its file (it does once every subscriber is in
+/// place), so the processes started after it publish nothing it misses. A recorder that
+/// exits first is the watch loop's to report; one that takes longer than
+/// [`RECORDER_READY`] is said, and the run goes on.
+fn await_recorder(
+    slot: &mut Slot<'_>,
+    path: &Path,
+    before: Option<std::time::SystemTime>,
+    log: &Log,
+) -> Option<RunEnd> {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = signals::first() {
+            return Some(RunEnd::Signal(s));
+        }
+        if file_stamp(path).is_some_and(|now| Some(now) != before) {
+            return None;
+        }
+        let SlotState::Running(child) = &mut slot.state else {
+            return None;
+        };
+        if !matches!(child.try_wait(), Ok(None)) {
+            return None;
+        }
+        if start.elapsed() > RECORDER_READY {
+            log.event(
+                RECORDER,
+                format_args!(
+                    "not subscribed after {RECORDER_READY:?}: the run starts without waiting for it"
+                ),
+            );
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
 }
 

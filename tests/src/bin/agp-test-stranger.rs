@@ -55,8 +55,7 @@ fn run() -> Result<(), String> {
     let frames = instance
         .ir_frames(&node)
         .map_err(|e| format!("cannot open the frames: {e:?}"))?
-        .data
-        .subscriber_builder()
+        .subscriber()
         .create()
         .map_err(|e| format!("cannot subscribe to the frames: {e:?}"))?;
     let command_topic = instance

@@ -199,8 +199,7 @@ impl TruthRecorder {
         let subscriber = instance
             .ground_truth(node)
             .map_err(|e| anyhow!("cannot open the ground truth: {e:?}"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(|e| anyhow!("cannot subscribe to the ground truth: {e:?}"))?;
         Ok(Self {
@@ -247,8 +246,7 @@ impl EstimateRecorder {
         let subscriber = instance
             .estimates(node)
             .map_err(|e| anyhow!("cannot open the estimates: {e:?}"))?
-            .data
-            .subscriber_builder()
+            .subscriber()
             .create()
             .map_err(|e| anyhow!("cannot subscribe to the estimates: {e:?}"))?;
         Ok(Self {
@@ -375,8 +373,7 @@ fn watch(
     let tasks = instance
         .task(&node)
         .map_err(|e| anyhow!("cannot open the task topic: {e:?}"))?
-        .data
-        .subscriber_builder()
+        .subscriber()
         .create()
         .map_err(|e| anyhow!("cannot subscribe to the task: {e:?}"))?;
     let mut estimates = EstimateRecorder::open(instance, &node)?;

@@ -1,0 +1,227 @@
+//! Recording a lockstep run in MCAP (a launch file's `record` key) and replaying it: every
+//! topic a channel with the counts physics and the planner published, and `agp replay`
+//! ending in the object's final true pose to the bit, every recorded frame reproduced.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use agp_recording::{Recording, TOPIC_COUNT, recorded_topics};
+use agp_runtime::Instance;
+use agp_shared_types::{GroundTruth, IrFrame, ServiceNames};
+use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
+
+/// Safety net only: the run takes well under a second.
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// A short lockstep run recorded into `run.mcap`: physics, the estimator serving a learned
+/// triangle, and the scripted drive (two pushes, each from a reset). `agp up` starts the
+/// recorder first and the others once it has subscribed (its file exists); the planner
+/// (through `sh`) also waits for the test's own ground-truth reader (`truth.ready`).
+/// Nothing runs at another priority: the recorder's buffers (`agp_runtime::TAP_DEPTH`)
+/// hold seconds of the ring at full lockstep speed.
+fn launch(instance: &str, ag: &std::path::Path) -> String {
+    let planner = bin_path("agp-planner");
+    let estimator = bin_path("agp-estimator");
+    format!(
+        r#"instance = "{instance}"
+scenario = "triangle"
+record = "run.mcap"
+
+[clock]
+mode = "lockstep"
+
+[[process]]
+name = "physics"
+exec = "agp-physics"
+
+[[process]]
+name = "estimator"
+exec = "{estimator}"
+args = ["--load", "{ag}"]
+
+[[process]]
+name = "planner"
+exec = "/bin/sh"
+args = ["-c", "while [ ! -e truth.ready ]; do sleep 0.01; done; exec {planner} --mode script --pushes 2 --push-ms 300"]
+ends_run = true
+"#,
+        ag = ag.display(),
+        planner = planner.display(),
+        estimator = estimator.display()
+    )
+}
+
+/// Reads the instance's ground truth (as the judge does) from when its supervisor is up
+/// until `stop`; the latest sample. Says it listens by creating `ready`.
+fn truth_reader(
+    name: String,
+    ready: std::path::PathBuf,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<Option<GroundTruth>> {
+    std::thread::spawn(move || {
+        let instance = Instance::new(&name).expect("a valid name");
+        let deadline = Instant::now() + TIMEOUT;
+        while !instance.control_exists() {
+            assert!(Instant::now() < deadline, "the supervisor never came up");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let node = instance.node("test-truth", false).expect("a node");
+        let sub = instance
+            .ground_truth(&node)
+            .expect("the ground truth topic")
+            .data
+            .subscriber_builder()
+            .create()
+            .expect("a ground truth subscriber");
+        std::fs::write(&ready, b"").expect("write the ready marker");
+        let mut last: Option<GroundTruth> = None;
+        loop {
+            let stopping = stop.load(Ordering::Relaxed);
+            while let Ok(Some(t)) = sub.receive() {
+                if last.is_none_or(|l| t.step >= l.step) {
+                    last = Some(*t);
+                }
+            }
+            if stopping {
+                return last;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    })
+}
+
+fn bits(v: f64) -> String {
+    format!("{:#018x}", v.to_bits())
+}
+
+#[test]
+fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_bit_for_bit() {
+    let ag = learned_ag("triangle");
+    let name = format!("rec{}", std::process::id() % 100_000);
+    let replay_name = format!("rpl{}", std::process::id() % 100_000);
+    let dir = LaunchDir::new(&launch(&name, &ag));
+    let stop = Arc::new(AtomicBool::new(false));
+    let reader = truth_reader(
+        name.clone(),
+        dir.path().join("truth.ready"),
+        Arc::clone(&stop),
+    );
+    let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);
+    stop.store(true, Ordering::Relaxed);
+    let truth = reader
+        .join()
+        .expect("the truth reader")
+        .expect("some ground truth");
+    assert!(
+        run.status.success(),
+        "agp up: {}\n{}\n{}",
+        run.status,
+        run.stdout,
+        run.stderr
+    );
+    let rec = Recording::open(&dir.path().join("run.mcap")).expect("a readable recording");
+
+    // The file: every topic a channel, named by its service, its schema by the payload's
+    // iceoryx2 type name.
+    assert!(!rec.truncated, "the recorder completed the file");
+    assert_eq!(rec.channels.len(), TOPIC_COUNT);
+    for t in recorded_topics() {
+        let c = rec
+            .channel(t.service)
+            .unwrap_or_else(|| panic!("no channel `{}`", t.service));
+        assert_eq!(c.schema_name, t.type_name);
+        assert_eq!(c.message_encoding, "agp-repr-c");
+    }
+    assert!(rec.channel(ServiceNames::GROUND_TRUTH).is_none());
+    let run_meta = rec.run();
+    assert_eq!(run_meta["instance"], name);
+    assert_eq!(run_meta["clock"], "lockstep");
+    assert_eq!(run_meta["scenario"], "triangle");
+    assert!(run_meta["launch_toml"].contains("record = \"run.mcap\""));
+
+    // The counts: physics published one frame at the start, one per applied command and
+    // one per reset; the planner one command per step and two resets; the estimator a
+    // whole set of 3 x 11 grids. The recorder dropped nothing and lost nothing.
+    let count = |topic: &str| rec.channel(topic).map_or(0, |c| c.messages);
+    let frames: Vec<IrFrame> = rec
+        .topic_messages(ServiceNames::IR_FRAMES)
+        .expect("messages")
+        .map(|m| agp_recording::payload_from_bytes::<IrFrame>(&m.data).expect("a frame"))
+        .collect();
+    let last_step = frames.last().expect("frames").step;
+    assert_eq!(frames[0].step, 0, "the recording starts with the run");
+    assert_eq!(last_step, truth.step, "the last frame is the final state's");
+    assert_eq!(count(ServiceNames::RESETS), 2);
+    assert_eq!(count(ServiceNames::MOTOR_COMMANDS), last_step);
+    let stats = rec.recorder_stats();
+    assert_eq!(
+        count(ServiceNames::IR_FRAMES),
+        1 + last_step + count(ServiceNames::RESETS),
+        "every frame recorded"
+    );
+    assert_eq!(count(ServiceNames::GRIDS), 33);
+    assert!(count(ServiceNames::ESTIMATES) > 0);
+    for t in recorded_topics() {
+        for what in ["dropped", "lost"] {
+            assert_eq!(
+                stats[&format!("{}.{what}", t.service)],
+                "0",
+                "{} {what}",
+                t.service
+            );
+        }
+    }
+
+    // The replay: every recorded frame again to the bit, and the same final true pose.
+    let json = dir.path().join("replay.json");
+    let replay = run_agp(
+        dir.path(),
+        &[
+            "replay",
+            "run.mcap",
+            "--instance",
+            &replay_name,
+            "--json",
+            json.to_str().expect("a UTF-8 path"),
+        ],
+        TIMEOUT,
+    );
+    assert!(
+        replay.status.success(),
+        "agp replay: {}\n{}\n{}",
+        replay.status,
+        replay.stdout,
+        replay.stderr
+    );
+    let account: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("the replay's account"))
+            .expect("JSON");
+    assert_eq!(account["complete"], true);
+    assert_eq!(account["frames_compared"], frames.len() as u64);
+    assert_eq!(account["frames_unrecorded"], 0);
+    assert_eq!(account["frames_equal"], frames.len() as u64);
+    let fin = &account["final"];
+    assert_eq!(fin["step"], truth.step);
+    for (key, v) in [
+        ("x_bits", truth.object.x),
+        ("y_bits", truth.object.y),
+        ("theta_bits", truth.object.theta),
+    ] {
+        assert_eq!(fin["object"][key], bits(v), "object {key}");
+    }
+    for (key, v) in [
+        ("x_bits", truth.robot.x),
+        ("y_bits", truth.robot.y),
+        ("theta_bits", truth.robot.theta),
+    ] {
+        assert_eq!(fin["robot"][key], bits(v), "robot {key}");
+    }
+
+    assert_eq!(count_instance_files(&name), 0, "files of `{name}` remain");
+    assert_eq!(
+        count_instance_files(&replay_name),
+        0,
+        "files of `{replay_name}` remain"
+    );
+}
