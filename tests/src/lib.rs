@@ -148,6 +148,19 @@ pub struct Finished {
     pub stderr: String,
 }
 
+impl Finished {
+    /// Panics, with the status and everything the run printed, unless it exited 0.
+    pub fn assert_success(&self, what: &str) {
+        assert!(
+            self.status.success(),
+            "{what} ended with {}\nstdout:\n{}\nstderr:\n{}",
+            self.status,
+            self.stdout,
+            self.stderr
+        );
+    }
+}
+
 /// A running `agp up`: its stdout read line by line as it comes (children share it),
 /// its stderr collected.
 pub struct AgpUp {

@@ -104,13 +104,7 @@ fn the_python_planner_on_stock_iceoryx2_places_the_triangle() {
         TIMEOUT,
     );
     let wall = start.elapsed();
-    assert!(
-        run.status.success(),
-        "agp up ended with {}\nstdout:\n{}\nstderr:\n{}",
-        run.status,
-        run.stdout,
-        run.stderr
-    );
+    run.assert_success("`agp up`");
     let done = run
         .stdout
         .lines()

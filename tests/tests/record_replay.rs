@@ -113,13 +113,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
         .join()
         .expect("the truth reader")
         .expect("some ground truth");
-    assert!(
-        run.status.success(),
-        "agp up: {}\n{}\n{}",
-        run.status,
-        run.stdout,
-        run.stderr
-    );
+    run.assert_success("`agp up`");
     let rec = Recording::open(&dir.path().join("run.mcap")).expect("a readable recording");
 
     // The file: every topic a channel, named by its service, its schema by the payload's
@@ -187,13 +181,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
         ],
         TIMEOUT,
     );
-    assert!(
-        replay.status.success(),
-        "agp replay: {}\n{}\n{}",
-        replay.status,
-        replay.stdout,
-        replay.stderr
-    );
+    replay.assert_success("`agp replay`");
     let account: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).expect("the replay's account"))
             .expect("JSON");

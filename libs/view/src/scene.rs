@@ -60,6 +60,19 @@ fn identity() -> Pose {
     pose_at(DVec2::ZERO, 0.0, 0.0)
 }
 
+/// A sphere of `diameter` metres at `p`, height `z`.
+fn dot(p: DVec2, z: f64, diameter: f64, color: Color) -> SpherePrimitive {
+    SpherePrimitive {
+        pose: Some(pose_at(p, z, 0.0)),
+        size: Some(Vector3 {
+            x: diameter,
+            y: diameter,
+            z: diameter,
+        }),
+        color: Some(color),
+    }
+}
+
 fn rgba(r: f64, g: f64, b: f64, a: f64) -> Color {
     Color { r, g, b, a }
 }
@@ -333,15 +346,8 @@ pub fn estimate_scene(e: &ObjectEstimate, border: Option<&[DVec2]>, ts: u64) -> 
         }
         if e.contact == 1 {
             let cp = pose.to_world(DVec2::new(e.contact_point[0], e.contact_point[1]));
-            ent.spheres.push(SpherePrimitive {
-                pose: Some(pose_at(cp, z, 0.0)),
-                size: Some(Vector3 {
-                    x: 0.008,
-                    y: 0.008,
-                    z: 0.008,
-                }),
-                color: Some(rgba(1.0, 0.3, 0.1, 1.0)),
-            });
+            ent.spheres
+                .push(dot(cp, z, 0.008, rgba(1.0, 0.3, 0.1, 1.0)));
         }
         let bound = if finite {
             format!(
@@ -376,15 +382,7 @@ pub fn estimate_scene(e: &ObjectEstimate, border: Option<&[DVec2]>, ts: u64) -> 
     if e.centroid_valid == 1 {
         let c = DVec2::new(e.centroid[0], e.centroid[1]);
         let mut ent = entity("centroid_track", ts);
-        ent.spheres.push(SpherePrimitive {
-            pose: Some(pose_at(c, z, 0.0)),
-            size: Some(Vector3 {
-                x: 0.006,
-                y: 0.006,
-                z: 0.006,
-            }),
-            color: Some(rgba(0.8, 0.5, 1.0, 1.0)),
-        });
+        ent.spheres.push(dot(c, z, 0.006, rgba(0.8, 0.5, 1.0, 1.0)));
         if e.centroid_sigma_m.is_finite()
             && e.centroid_sigma_m > 0.0
             && e.centroid_sigma_m <= MAX_DRAWN_SIGMA_M
