@@ -142,7 +142,7 @@ pub struct MotorCommand {
 /// robot's true pose. Applied by physics between two steps.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::Reset.v3")]
+#[type_name("agp::Reset.v4")]
 pub struct Reset {
     /// Chosen by the sender, echoed in [`IrFrame::reset_seq`] once applied.
     pub seq: u64,
@@ -153,6 +153,10 @@ pub struct Reset {
     pub epoch: u64,
     /// The sender's token for `epoch`, as [`MotorCommand::token`].
     pub token: u64,
+    /// Nonzero: physics restarts its noise streams (IR, odometry, the overhead fix) from
+    /// this seed, as a world built with it would draw them, so an episode started by a
+    /// reset draws the same noise whatever ran before it. Zero: the streams go on.
+    pub seed: u64,
 }
 
 /// The true state of the world: for evaluation, the probe and the `oracle` planner only.
@@ -461,7 +465,7 @@ const _: () = {
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
     assert!(size_of::<IrFrame>() == 72 * 2 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
     assert!(size_of::<MotorCommand>() == 72 + 40 && align_of::<MotorCommand>() == 8);
-    assert!(size_of::<Reset>() == 72 && align_of::<Reset>() == 8);
+    assert!(size_of::<Reset>() == 80 && align_of::<Reset>() == 8);
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
     assert!(
         size_of::<ObjectEstimate>()

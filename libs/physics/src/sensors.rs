@@ -105,6 +105,13 @@ impl SensorModel {
         self.max_range
     }
 
+    /// Restarts the noise streams from `seed`, as [`SensorModel::new`] seeds them.
+    pub fn reseed(&mut self, seed: u64) {
+        self.ir_rng = Rng::stream(seed, IR_STREAM);
+        self.odometry_rng = Rng::stream(seed, ODOMETRY_STREAM);
+        self.fix_rng = Rng::stream(seed, FIX_STREAM);
+    }
+
     /// Starts a new epoch at `step`: odometry at `robot`, clocks restarted, and an IR
     /// sample taken at once. `cast(origin, dir)` gives the distance along a world ray to the
     /// object, if within `max_range`.

@@ -585,6 +585,13 @@ impl Sim {
     /// Puts the object and the robot at the given poses at rest, sets the odometry to the
     /// robot's pose and takes an IR sample at once; the sensor clocks restart from here.
     /// The step count and simulated time go on.
+    /// Restarts the sensors' noise streams from `seed`, as a world built with
+    /// `SimConfig::seed = seed` draws them; with [`Sim::reset`] after it, the world's noise
+    /// from then on is that of a fresh world of that seed.
+    pub fn reseed(&mut self, seed: u64) {
+        self.sensors.reseed(seed);
+    }
+
     pub fn reset(&mut self, object: Pose, robot: Pose) {
         let robot = Pose::new(robot.x, robot.y, wrap_angle(robot.theta));
         self.robot_pose = robot;

@@ -122,7 +122,8 @@ pub(crate) fn reset() -> Layout {
         layout!(Reset {
             seq: "u64",
             epoch: "u64",
-            token: "u64"
+            token: "u64",
+            seed: "u64"
         }),
         pose!(Reset, object),
         pose!(Reset, robot),

@@ -23,6 +23,8 @@ pub enum ReplayAction {
         seq: u64,
         object: Pose2,
         robot: Pose2,
+        /// The noise seed it restarted physics's streams from (0: none).
+        seed: u64,
     },
     /// The wheel speeds that stepped the world from `step` to `step + 1`.
     Command {
@@ -181,6 +183,7 @@ impl ReplayScript {
                     seq: r.seq,
                     object: r.object,
                     robot: r.robot,
+                    seed: r.seed,
                 });
                 expected.push(by_key.get(&(step, world)).copied());
             }

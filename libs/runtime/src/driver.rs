@@ -423,9 +423,30 @@ impl LockstepDriver {
         self.await_frame()
     }
 
+    /// As [`LockstepDriver::reset`], and physics restarts its noise streams from `seed`
+    /// (0: they go on; [`Reset::seed`]).
+    pub fn reset_seeded(
+        &mut self,
+        object: Pose2,
+        robot: Pose2,
+        seed: u64,
+    ) -> Result<&IrFrame, DriveError> {
+        self.send_reset_seeded(object, robot, seed)?;
+        self.await_frame()
+    }
+
     /// Publishes a reset (as [`LockstepDriver::reset`]); the frame of the reset world is
     /// then taken with [`LockstepDriver::take_frame`] or [`LockstepDriver::await_frame`].
     pub fn send_reset(&mut self, object: Pose2, robot: Pose2) -> Result<(), DriveError> {
+        self.send_reset_seeded(object, robot, 0)
+    }
+
+    fn send_reset_seeded(
+        &mut self,
+        object: Pose2,
+        robot: Pose2,
+        seed: u64,
+    ) -> Result<(), DriveError> {
         let _in_iceoryx2 = crate::alloc_count::enter(crate::alloc_count::Region::Iceoryx2);
         self.resets_sent += 1;
         // Unique per driver and reset, so an old frame is never taken for the new world.
@@ -441,6 +462,7 @@ impl LockstepDriver {
                 robot,
                 epoch: self.epoch,
                 token: self.token,
+                seed,
             })
             .send()
             .map_err(|e| DriveError::Port(format!("send of a reset: {e:?}")))?;

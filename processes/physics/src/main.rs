@@ -459,6 +459,9 @@ impl Runner {
         self.gate.name_strangers(&self.ports);
         if let Some(r) = last {
             let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
+            if r.seed != 0 {
+                self.sim.reseed(r.seed);
+            }
             self.sim.reset(r.object, r.robot);
             self.reset_seq = r.seq;
             return Ok(true);

@@ -229,7 +229,12 @@ pub(crate) fn drive(args: &DriverArgs) -> Result<u8> {
     let mut done = 0usize;
     for (k, (action, expected)) in script.actions.iter().zip(&script.expected).enumerate() {
         let frame = match *action {
-            ReplayAction::Reset { object, robot, .. } => driver.reset(object, robot),
+            ReplayAction::Reset {
+                object,
+                robot,
+                seed,
+                ..
+            } => driver.reset_seeded(object, robot, seed),
             ReplayAction::Command {
                 step,
                 left_mps,

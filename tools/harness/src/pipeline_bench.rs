@@ -116,7 +116,9 @@ impl PipelineBench {
         self.episodes += 1;
         let o = self.scenario.object.start;
         let r = self.scenario.robot.start;
-        match self.driver.reset(o, r) {
+        // The episode's seed restarts physics's noise, as an in-process episode's fresh
+        // world of that seed draws it: episode k's noise is the same for every planner.
+        match self.driver.reset_seeded(o, r, config.seed) {
             Ok(_) => {}
             Err(DriveError::Shutdown) => bail!("interrupted"),
             Err(e) => return Err(e).context("cannot reset the bench's physics"),
