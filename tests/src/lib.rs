@@ -82,13 +82,7 @@ pub fn learned_ag(scenario: &str) -> PathBuf {
         // Safety net only: one learning takes seconds.
         Duration::from_secs(600),
     );
-    assert!(
-        run.status.success(),
-        "`agp bench learn --scenario {scenario}` failed: {}\n{}\n{}",
-        run.status,
-        run.stdout,
-        run.stderr
-    );
+    run.assert_success(&format!("`agp bench learn --scenario {scenario}`"));
     let learned = tmp.path().join(format!("{scenario}.ag"));
     assert!(
         learned.is_file(),
@@ -576,6 +570,28 @@ pub fn triangle_learning_launch(instance: &str, trials_per_alpha: u32, env: &str
          [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n{env}\
          args = [\"--mode\", \"learn\", \"--trials-per-alpha\", \"{trials_per_alpha}\"]\n\
          ends_run = true\n"
+    )
+}
+
+/// A lockstep launch file of the triangle's ring: physics, `agp-estimator --load ag`, and
+/// `agp-planner` with `planner_args` (the items of a TOML array, such as
+/// `"--mode", "serve"`). `top` goes among the top-level keys as is (such as `view = 0\n`);
+/// with `ends_run` the planner's exit ends the run.
+pub fn triangle_ring_launch(
+    instance: &str,
+    ag: &Path,
+    top: &str,
+    planner_args: &str,
+    ends_run: bool,
+) -> String {
+    let ends = if ends_run { "ends_run = true\n" } else { "" };
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n{top}\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
+         args = [{planner_args}]\n{ends}",
+        ag.display()
     )
 }
 

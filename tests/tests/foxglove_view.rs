@@ -21,7 +21,9 @@ use agp_shared_types::{
     GRID_CELLS, GRID_SIDE, GradientGrid, GridHeader, GridKind, IrFrame, ObjectEstimate, Pose2,
     ServiceNames, Task, TaskKind,
 };
-use agp_tests::{AgpUp, DownOnPanic, LaunchDir, count_instance_files, learned_ag, run_agp};
+use agp_tests::{
+    AgpUp, DownOnPanic, LaunchDir, count_instance_files, learned_ag, run_agp, triangle_ring_launch,
+};
 use agp_world::Scenario;
 use serde_json::Value;
 
@@ -108,14 +110,14 @@ fn pose_of(entity: &Value) -> (f64, f64, f64) {
     (v[0], v[1], v[2])
 }
 
+/// The triangle's ring serving goals, with the view on any free port (`view = 0`).
 fn launch(instance: &str, ag: &Path) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\nview = 0\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"serve\", \"--planner\", \"affordance\"]\n",
-        ag.display()
+    triangle_ring_launch(
+        instance,
+        ag,
+        "view = 0\n",
+        r#""--mode", "serve", "--planner", "affordance""#,
+        false,
     )
 }
 

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use agp_runtime::{AgpIpc, Instance};
-use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag};
+use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag, triangle_ring_launch};
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node, NodeBuilder};
 use iceoryx2::service::port_factory::PortFactory;
@@ -14,14 +14,14 @@ use iceoryx2::service::port_factory::PortFactory;
 /// Safety net of every wait; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(120);
 
+/// The triangle's ring with `planner` placing the triangle; its end ends the run.
 fn launch(instance: &str, planner: &str, ag: &std::path::Path) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"place\", \"--planner\", \"{planner}\"]\nends_run = true\n",
-        ag.display()
+    triangle_ring_launch(
+        instance,
+        ag,
+        "",
+        &format!(r#""--mode", "place", "--planner", "{planner}""#),
+        true,
     )
 }
 

@@ -7,21 +7,23 @@
 use std::path::Path;
 use std::time::Duration;
 
-use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag, run_agp, status_json};
+use agp_tests::{
+    AgpUp, LaunchDir, count_instance_files, learned_ag, run_agp, status_json, triangle_ring_launch,
+};
 use agp_world::Scenario;
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(240);
 
+/// The triangle's ring with the planner serving goals.
 fn launch(instance: &str, ag: &Path) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"serve\", \"--planner\", \"affordance\"]\n",
-        ag.display()
+    triangle_ring_launch(
+        instance,
+        ag,
+        "",
+        r#""--mode", "serve", "--planner", "affordance""#,
+        false,
     )
 }
 

@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use agp_runtime::{Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::{Pose2, stage};
-use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
+use agp_tests::{
+    AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp, triangle_ring_launch,
+};
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -286,14 +288,12 @@ fn profile_of_a_learning_run_reports_the_hops_through_the_estimator_and_leaves_n
 /// The placement task with the estimator serving a learned AG file, towards a goal far
 /// enough (800 mm and a half turn away) that the run outlasts the profile.
 fn place_launch(instance: &str, ag: &Path) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
-         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"place\", \"--goal=600,600,180\"]\n\
-         ends_run = true\n",
-        ag.display()
+    triangle_ring_launch(
+        instance,
+        ag,
+        "",
+        r#""--mode", "place", "--goal=600,600,180""#,
+        true,
     )
 }
 

@@ -966,6 +966,9 @@ fn resolve_process(
     }
 }
 
+/// The name of the process `record = "FILE"` adds.
+pub const RECORDER_PROCESS: &str = "recorder";
+
 /// The process `record = "FILE"` adds: `agp record --launch LAUNCH [--seed N] FILE`
 /// (instance, scenario, clock and rate come from its context variables), never restarted,
 /// given 10 s to finish the file when stopped. The seed is physics's `--seed` or
@@ -994,7 +997,7 @@ fn record_process(
         check.fault_at(
             raw,
             LaunchFaultKind::MissingExecutable {
-                process: "recorder".to_owned(),
+                process: RECORDER_PROCESS.to_owned(),
                 exec: "agp".to_owned(),
                 looked_at: exec.clone(),
             },
@@ -1027,7 +1030,7 @@ fn record_process(
     args.push(base.join(out).display().to_string());
     ProcessConfig {
         line: check.line_of(&raw.span()),
-        name: "recorder".to_owned(),
+        name: RECORDER_PROCESS.to_owned(),
         exec,
         args,
         env: BTreeMap::new(),

@@ -12,7 +12,7 @@ use agp_runtime::{AgpIpc, Instance, InstanceLock, Topic, WaitStrategy};
 use agp_shared_types::{
     GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
 };
-use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
+use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig, RECORDER_PROCESS};
 use anyhow::{Context, Result, anyhow};
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node};
@@ -454,7 +454,7 @@ fn run(
         let recording = config
             .record
             .as_deref()
-            .filter(|_| slot.process.name == RECORDER);
+            .filter(|_| slot.process.name == RECORDER_PROCESS);
         let before = recording.and_then(file_stamp);
         if let Err(end) = slot.start(config, log, None, 0) {
             return end;
@@ -487,8 +487,6 @@ fn run(
     }
 }
 
-/// The process `record = "FILE"` adds (launch.rs).
-const RECORDER: &str = "recorder";
 /// How long the processes after the recorder wait for it to be subscribed.
 const RECORDER_READY: Duration = Duration::from_secs(10);
 
@@ -523,7 +521,7 @@ fn await_recorder(
         }
         if start.elapsed() > RECORDER_READY {
             log.event(
-                RECORDER,
+                RECORDER_PROCESS,
                 format_args!(
                     "not subscribed after {RECORDER_READY:?}: the run starts without waiting for it"
                 ),
