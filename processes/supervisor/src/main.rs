@@ -1,6 +1,6 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
-use agp_harness::{bench_learn, bench_paper, bench_tasks, probe};
+use agp_harness::{bench_learn, bench_paper, bench_tasks, bench_trajectory, probe};
 
 mod control;
 mod control_plane;
@@ -213,7 +213,7 @@ enum BenchCmd {
     /// positions to the path, and their ratio beside the paper's 7.82 / 10.71.
     ///
     /// Example: agp bench trajectory --scenario lshape --json trajectory.json --plot trajectory.svg
-    Trajectory(bench_tasks::BenchTrajectoryArgs),
+    Trajectory(bench_trajectory::BenchTrajectoryArgs),
     /// All three benchmarks on the paper's objects (learning: triangle, square, lshape,
     /// circle; trajectory: lshape; placement: triangle and lshape with every planner), then
     /// our figures beside the paper's and the project's targets, met or missed. Everything
@@ -271,7 +271,7 @@ fn main() -> ExitCode {
         } => bench_tasks::run_place(args).map(|_| 0),
         Cmd::Bench {
             what: BenchCmd::Trajectory(args),
-        } => bench_tasks::run_trajectory(args).map(|_| 0),
+        } => bench_trajectory::run_trajectory(args).map(|_| 0),
         Cmd::Bench {
             what: BenchCmd::Paper(args),
         } => bench_paper::run(args).map(|_| 0),

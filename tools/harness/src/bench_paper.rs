@@ -9,7 +9,8 @@ use anyhow::{Context, Result};
 use serde_json::{Value, json};
 
 use crate::bench_learn::{self, BenchLearnArgs};
-use crate::bench_tasks::{self, BenchPlaceArgs, BenchTrajectoryArgs};
+use crate::bench_tasks::{self, BenchPlaceArgs};
+use crate::bench_trajectory::{self, BenchTrajectoryArgs};
 
 /// The paper's figures (Sanchez-Fibla, Duff, Verschure; benchmarks.md).
 const PAPER_MAX_ROTATION_DEG: [(&str, f64); 3] = [("0", 39.51), ("15", 59.06), ("-15", 79.78)];
@@ -61,7 +62,7 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
     let ag = |object: &str| Some(learn_dir.join(format!("{object}.ag")));
 
     println!("\n== 2/3 push along a trajectory ==");
-    let trajectory = bench_tasks::run_trajectory(&BenchTrajectoryArgs {
+    let trajectory = bench_trajectory::run_trajectory(&BenchTrajectoryArgs {
         scenario: TRAJECTORY_OBJECT.into(),
         ag: ag(TRAJECTORY_OBJECT),
         seed: Some(args.seed),

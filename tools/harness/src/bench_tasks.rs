@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::{PlannerSummary, place_goals, run_episode, trajectory_error};
+use crate::{PlannerSummary, place_goals, run_episode};
 use agp_affordance::AffordanceGradient;
 use agp_planning::{
     EpisodeConfig, EpisodeResult, EstimateVerdict, Evaluation, PlannerKind, PoseSample, Task,
@@ -71,32 +71,6 @@ pub struct BenchPlaceArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// The options of `agp bench trajectory`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct BenchTrajectoryArgs {
-    /// Built-in scenario or a scenario file; its `path_mm` if it has one, else 300 mm
-    /// along +x then 200 mm at 45 deg.
-    #[arg(long, default_value = "lshape")]
-    pub scenario: String,
-    /// Affordance gradient file learned from IR (default: `results/learn/<object>.ag`,
-    /// learned first with `agp bench learn` when missing).
-    #[arg(long)]
-    pub ag: Option<PathBuf>,
-    /// Seed of the sensor noise (default: the scenario's).
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Step the physics library in-process instead of running the pipeline's processes.
-    #[arg(long)]
-    pub in_process: bool,
-    /// Also write the result as JSON to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Also draw both runs (path, object every few steps, as the paper's Fig. 6) to this
-    /// SVG file.
-    #[arg(long)]
-    pub plot: Option<PathBuf>,
-}
-
 #[derive(Debug, Serialize)]
 struct PlaceEpisodeJson {
     goal_x_mm: f64,
@@ -139,33 +113,6 @@ struct PlaceJson {
     wall_time_s: f64,
 }
 
-#[derive(Debug, Serialize)]
-struct TrajectoryPlannerJson {
-    mean_error_mm: f64,
-    points: usize,
-    reached_end: bool,
-    final_distance_to_end_mm: f64,
-    pushes: u32,
-    circlings: u32,
-    sim_time_s: f64,
-    wall_time_s: f64,
-    /// The estimator's estimates of the episode, judged.
-    estimate: Option<EstimateVerdict>,
-}
-
-#[derive(Debug, Serialize)]
-struct TrajectoryJson {
-    benchmark: &'static str,
-    scenario: String,
-    seed: u64,
-    physics: &'static str,
-    path_mm: Vec<[f64; 2]>,
-    planners: BTreeMap<String, TrajectoryPlannerJson>,
-    /// Affordance over baseline.
-    ratio: f64,
-    wall_time_s: f64,
-}
-
 /// The AG file the affordance and oracle planners use: `path`, or the learning
 /// benchmark's file for the object, learned first (and said so) when it is missing.
 /// `None` when no planner of `needed_by` needs one.
@@ -205,7 +152,7 @@ pub fn resolve_ag(
     clippy::large_enum_variant,
     reason = "one per benchmark run; boxing buys nothing"
 )]
-enum Runner<'a> {
+pub(crate) enum Runner<'a> {
     InProcess {
         scenario: &'a Scenario,
         robot: RobotDescription,
@@ -217,7 +164,7 @@ enum Runner<'a> {
 impl<'a> Runner<'a> {
     /// A runner for `planner`'s episodes: each planner gets a fresh physics seeded with
     /// `seed`, so its results do not depend on which planners ran before it.
-    fn start(
+    pub(crate) fn start(
         in_process: bool,
         scenario_arg: &str,
         scenario: &'a Scenario,
@@ -251,7 +198,7 @@ impl<'a> Runner<'a> {
         }
     }
 
-    fn episode(
+    pub(crate) fn episode(
         &mut self,
         planner: PlannerKind,
         task: &Task,
@@ -274,7 +221,7 @@ impl<'a> Runner<'a> {
         }
     }
 
-    fn finish(self) -> Result<()> {
+    pub(crate) fn finish(self) -> Result<()> {
         match self {
             Self::InProcess { .. } => Ok(()),
             Self::Pipeline(bench) => {
@@ -291,7 +238,7 @@ impl<'a> Runner<'a> {
 }
 
 /// The progress bar's label for planners that run side by side.
-fn prefix_of(planners: &[PlannerKind]) -> String {
+pub(crate) fn prefix_of(planners: &[PlannerKind]) -> String {
     planners
         .iter()
         .map(|p| p.name())
@@ -300,18 +247,18 @@ fn prefix_of(planners: &[PlannerKind]) -> String {
 }
 
 /// The evaluation of an episode both runners judged.
-fn judged(r: &EpisodeResult) -> &Evaluation {
+pub(crate) fn judged(r: &EpisodeResult) -> &Evaluation {
     r.evaluation
         .as_ref()
         .expect("both runners judge every episode against ground truth")
 }
 
 /// The JSON's `physics` field.
-fn physics_label(in_process: bool) -> &'static str {
+pub(crate) fn physics_label(in_process: bool) -> &'static str {
     if in_process { "in-process" } else { "pipeline" }
 }
 
-fn physics_note(in_process: bool) -> &'static str {
+pub(crate) fn physics_note(in_process: bool) -> &'static str {
     if in_process {
         IN_PROCESS_NOTE
     } else {
@@ -319,7 +266,7 @@ fn physics_note(in_process: bool) -> &'static str {
     }
 }
 
-fn progress(total: u64) -> ProgressBar {
+pub(crate) fn progress(total: u64) -> ProgressBar {
     let bar = ProgressBar::new(total);
     if let Ok(style) =
         ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} episodes {elapsed}")
@@ -329,7 +276,7 @@ fn progress(total: u64) -> ProgressBar {
     bar
 }
 
-fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value).context("cannot serialise the result")?;
     std::fs::write(path, text + "\n").with_context(|| format!("cannot write `{}`", path.display()))
 }
@@ -522,143 +469,6 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
             Overlay::Goal(goal),
         )?;
         println!("plot     {}", path.display());
-    }
-    Ok(doc)
-}
-
-/// Runs `agp bench trajectory`: the affordance and the baseline planner on the same
-/// seed.
-pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
-    let wall = Instant::now();
-    let scenario = Scenario::resolve(&args.scenario)
-        .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
-    let planners = [PlannerKind::Affordance, PlannerKind::Baseline];
-    let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &planners)?;
-    let note = physics_note(args.in_process);
-    let seed = args.seed.unwrap_or(scenario.task.seed);
-    let path = scenario.task.path.clone();
-    let config = EpisodeConfig {
-        seed,
-        ..EpisodeConfig::for_task(&scenario.task)
-    };
-    eprintln!(
-        "bench trajectory: scenario `{}`, seed {seed}; {note}",
-        scenario.name
-    );
-    let bar = progress(planners.len() as u64);
-    bar.set_prefix(prefix_of(&planners));
-    let task = Task::Trajectory { path: path.clone() };
-    let runs = side_by_side(&planners, |&planner| {
-        let mut runner = Runner::start(
-            args.in_process,
-            &args.scenario,
-            &scenario,
-            ag.as_deref(),
-            planner,
-            seed,
-        )?;
-        let r = runner
-            .episode(planner, &task, &config)
-            .with_context(|| format!("planner `{planner}`"));
-        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
-        let finished = runner.finish();
-        let r = r?;
-        finished?;
-        bar.inc(1);
-        Ok(r)
-    })
-    .into_iter()
-    .collect::<Result<Vec<_>>>()?;
-    bar.finish_and_clear();
-    let wall_time_s = wall.elapsed().as_secs_f64();
-
-    let errors: Vec<f64> = runs
-        .iter()
-        .map(|r| {
-            let poses: Vec<Pose2> = judged(r).samples.iter().map(|s| s.pose).collect();
-            trajectory_error(&path, &poses).unwrap_or(f64::NAN) * 1e3
-        })
-        .collect();
-    let ratio = errors[0] / errors[1];
-    println!(
-        "trajectory `{}`: seed {seed}, path {} mm; {note}",
-        scenario.name,
-        path.iter()
-            .map(|p| format!("({:.0}, {:.0})", p.x * 1e3, p.y * 1e3))
-            .collect::<Vec<_>>()
-            .join(" -> ")
-    );
-    println!(
-        "{:<12} {:>14} {:>8} {:>10} {:>8} {:>10} {:>8} {:>8}",
-        "planner", "mean err mm", "points", "end", "pushes", "circlings", "sim s", "wall s"
-    );
-    let mut json_planners = BTreeMap::new();
-    for ((planner, r), e) in planners.iter().zip(&runs).zip(&errors) {
-        println!(
-            "{:<12} {:>14.2} {:>8} {:>10} {:>8} {:>10} {:>8.0} {:>8.1}",
-            planner.name(),
-            e,
-            judged(r).samples.len(),
-            if r.success() { "reached" } else { r.end.name() },
-            r.pushes,
-            r.circlings,
-            r.sim_time_s,
-            r.wall_time_s
-        );
-        json_planners.insert(
-            planner.name().to_owned(),
-            TrajectoryPlannerJson {
-                mean_error_mm: *e,
-                points: judged(r).samples.len(),
-                reached_end: r.success(),
-                final_distance_to_end_mm: judged(r).position_error_mm,
-                pushes: r.pushes,
-                circlings: r.circlings,
-                sim_time_s: r.sim_time_s,
-                wall_time_s: r.wall_time_s,
-                estimate: r.estimate_verdict,
-            },
-        );
-    }
-    println!("ratio affordance / baseline {ratio:.2} (paper 7.82 / 10.71 = 0.73)");
-    println!("wall time {wall_time_s:.1} s");
-    let doc = serde_json::to_value(TrajectoryJson {
-        benchmark: "trajectory",
-        scenario: scenario.name.clone(),
-        seed,
-        physics: physics_label(args.in_process),
-        path_mm: path.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect(),
-        planners: json_planners,
-        ratio,
-        wall_time_s,
-    })
-    .context("cannot encode the result")?;
-    if let Some(file) = &args.json {
-        write_json(file, &doc)?;
-        println!("JSON     {}", file.display());
-    }
-    if let Some(file) = &args.plot {
-        let panels: Vec<Panel> = planners
-            .iter()
-            .zip(&runs)
-            .zip(&errors)
-            .map(|((planner, r), e)| Panel {
-                title: format!("{planner}: mean error {e:.2} mm per point"),
-                samples: &judged(r).samples,
-            })
-            .collect();
-        let title = format!(
-            "trajectory `{}`: path in red, object every few steps ({note})",
-            scenario.name
-        );
-        plot_runs(
-            file,
-            &title,
-            &scenario.object.shape,
-            &panels,
-            Overlay::Path(&path),
-        )?;
-        println!("plot     {}", file.display());
     }
     Ok(doc)
 }

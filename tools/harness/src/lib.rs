@@ -12,6 +12,7 @@
 pub mod bench_learn;
 pub mod bench_paper;
 pub mod bench_tasks;
+pub mod bench_trajectory;
 pub mod evaluation;
 pub mod hop;
 pub mod in_process;
@@ -20,6 +21,7 @@ pub mod math;
 pub mod pipeline;
 pub mod pipeline_bench;
 pub mod probe;
+pub mod seeds;
 pub mod side_by_side;
 pub mod task_goals;
 
