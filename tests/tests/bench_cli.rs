@@ -93,7 +93,7 @@ fn bench_place_writes_every_planners_figures_over_the_pipeline_and_leaves_no_fil
 }
 
 #[test]
-fn bench_trajectory_compares_both_planners_on_one_seed() {
+fn bench_trajectory_compares_both_planners_on_each_path_of_one_seed() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let ag = learned_ag("lshape");
     let ag = ag.to_str().expect("a UTF-8 path");
@@ -106,6 +106,10 @@ fn bench_trajectory_compares_both_planners_on_one_seed() {
             "lshape",
             "--ag",
             ag,
+            "--seed",
+            "7",
+            "--paths",
+            "straight,bend90",
             "--json",
             "t.json",
             "--plot",
@@ -117,18 +121,43 @@ fn bench_trajectory_compares_both_planners_on_one_seed() {
     let v = json(&dir.path().join("t.json"));
     assert_eq!(v["benchmark"], "trajectory");
     assert_eq!(v["physics"], "pipeline");
+    assert_eq!(v["seed"], 7);
+    assert_eq!(v["seeds"], serde_json::json!([7]));
     let a = num(&v["planners"]["affordance"], "mean_error_mm");
     let b = num(&v["planners"]["baseline"], "mean_error_mm");
     assert!(a > 0.0 && b > 0.0, "{v}");
     assert!((num(&v, "ratio") - a / b).abs() < 1e-9, "{v}");
+    let paths = v["paths"].as_object().expect("paths");
+    assert_eq!(
+        paths.keys().map(String::as_str).collect::<Vec<_>>(),
+        ["bend90", "straight"]
+    );
+    // The bend's second leg runs 250 mm towards -y: the path handed to the planner
+    // process is the benchmark's, not the scenario's line.
+    let corner_end = &v["paths"]["bend90"]["path_mm"][2];
+    let xy = |i: usize| corner_end[i].as_f64().expect("a number");
+    assert!(
+        (xy(0) - 300.0).abs() < 1e-6 && (xy(1) + 250.0).abs() < 1e-6,
+        "{v}"
+    );
+    let episode = &v["per_seed"][0]["paths"]["bend90"]["planners"];
     for planner in ["affordance", "baseline"] {
-        // The object is recorded while it is pushed: many points along 600 mm.
+        // The object is recorded while it is pushed: many points along 550 mm.
+        assert!(num(&episode[planner], "points") > 20.0, "{planner}: {v}");
+        // Both ended near the bent path's end, which only following the bend reaches.
         assert!(
-            num(&v["planners"][planner], "points") > 20.0,
+            num(&episode[planner], "final_distance_to_end_mm") < 30.0,
             "{planner}: {v}"
         );
     }
-    assert!(run.stdout.contains("paper 7.82 / 10.71"), "{}", run.stdout);
+    assert!(run.stdout.contains("bend90"), "{}", run.stdout);
+    assert!(run.stdout.contains("overall"), "{}", run.stdout);
+    assert!(
+        run.stdout
+            .contains("paper, one straight line: 7.82 / 10.71"),
+        "{}",
+        run.stdout
+    );
     assert_svg(&dir.path().join("t.svg"));
     assert_eq!(bench_files_left(run.pid), 0);
 }

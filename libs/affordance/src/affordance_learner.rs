@@ -98,6 +98,20 @@ impl PushOutcome {
     }
 }
 
+/// The grids a push adds to (every grid of a layer but S).
+const PUSH_GRIDS: [LayerGrid; 10] = [
+    LayerGrid::PushWeight,
+    LayerGrid::DisplacementX,
+    LayerGrid::DisplacementY,
+    LayerGrid::DisplacementSq,
+    LayerGrid::Rotation,
+    LayerGrid::RotationSq,
+    LayerGrid::RotationPos,
+    LayerGrid::RotationPosWeight,
+    LayerGrid::RotationNeg,
+    LayerGrid::RotationNegWeight,
+];
+
 /// Learns an object's [`AffordanceGradient`] from trials (the paper's Algorithms 1, 2, 4).
 ///
 /// Samples come in the object frame; turning IR readings into border points and poses into
@@ -211,6 +225,74 @@ impl AffordanceLearner {
         layer.max_rotation_rad = layer.max_rotation_rad.max(rot.abs());
         layer.pushes += 1;
         Ok(())
+    }
+
+    /// Online learning (a task's pushes, after the learning phase): the push is learned as
+    /// [`Self::add_push`] learns it, after the push statistics already at each cell it
+    /// reaches were multiplied by `forgetting^g` (`g` the push's unit-peak Gaussian at the
+    /// cell, `forgetting` in (0, 1]): at its contact point the earlier evidence then counts
+    /// `forgetting` times as much, far from it as much as before. 1 (or anything outside
+    /// (0, 1)) is [`Self::add_push`].
+    /// Allocates nothing.
+    pub fn add_recent_push(
+        &mut self,
+        alpha_deg: f64,
+        push: &PushOutcome,
+        forgetting: f64,
+    ) -> Result<(), SampleAddError> {
+        if forgetting > 0.0 && forgetting < 1.0 && push.contact_point_obj.is_finite() {
+            let k = self.layer_index(alpha_deg)?;
+            let layer = &mut self.gradient.layers[k];
+            let (cell, origin) = {
+                let g = layer.grid(LayerGrid::PushWeight);
+                (g.cell_size_m(), g.origin_m())
+            };
+            let ln = forgetting.ln() as f32;
+            let grids = &mut layer.grids;
+            gaussian_cells(
+                cell,
+                origin,
+                push.contact_point_obj,
+                self.push_sigma_m,
+                |k, g| {
+                    let f = (ln * g).exp();
+                    for grid in PUSH_GRIDS {
+                        grids[grid as usize].cells_mut()[k] *= f;
+                    }
+                },
+            );
+        }
+        self.add_push(alpha_deg, push)
+    }
+
+    /// Scales every learned push's effect: displacements by `displacement_gain`, rotations
+    /// by `rotation_gain` (both finite and positive; their squares' sums by the gains'
+    /// squares), weights untouched: every prediction then scales by the gains. For online
+    /// learning, where one change of the world (the floor, the object's mass) changes the
+    /// effect of every push alike. Allocates nothing.
+    pub fn scale_motion(&mut self, displacement_gain: f64, rotation_gain: f64) {
+        if !(displacement_gain.is_finite()
+            && displacement_gain > 0.0
+            && rotation_gain.is_finite()
+            && rotation_gain > 0.0)
+        {
+            return;
+        }
+        let (d, r) = (displacement_gain as f32, rotation_gain as f32);
+        for layer in &mut self.gradient.layers {
+            for (grid, f) in [
+                (LayerGrid::DisplacementX, d),
+                (LayerGrid::DisplacementY, d),
+                (LayerGrid::DisplacementSq, d * d),
+                (LayerGrid::Rotation, r),
+                (LayerGrid::RotationSq, r * r),
+                (LayerGrid::RotationPos, r),
+                (LayerGrid::RotationNeg, r),
+            ] {
+                layer.grids[grid as usize].scale(f);
+            }
+            layer.max_rotation_rad *= rotation_gain;
+        }
     }
 
     fn layer_index(&self, alpha_deg: f64) -> Result<usize, SampleAddError> {

@@ -9,6 +9,7 @@ mod ir_view;
 mod learn_events;
 mod learning_session;
 mod object_tracker;
+mod online_learner;
 mod robot_localizer;
 mod trial_recorder;
 
@@ -26,6 +27,7 @@ pub use learning_session::{
 pub use object_tracker::{
     BORDER_SECTORS, ObjectTracker, TrackerConfig, TrackerError, border_centroid,
 };
+pub use online_learner::{LearnedPush, OnlineLearner, OnlineLearningConfig};
 pub use robot_localizer::RobotLocalizer;
 pub use trial_recorder::{
     TrialFinishError, TrialOrderError, TrialPhase, TrialRecord, TrialRecorder,

@@ -22,7 +22,8 @@ use agp_shared_types::{LearnEvent, LearnEventKind, ObjectEstimate, Pose2, angle}
 use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point};
 use glam::DVec2;
 
-use crate::ApproachContact;
+use crate::online_learner::PendingPush;
+use crate::{ApproachContact, LearnedPush, OnlineLearner, OnlineLearningConfig};
 use crate::{ContactSense, RobotLocalizer};
 
 /// Sectors of [`ObjectEstimate::border_seen`]: 10 degrees each round the estimated centre.
@@ -58,6 +59,9 @@ pub struct TrackerConfig {
     /// The object's rotational symmetry for the matcher (0 disc, 1 none, k: k-fold);
     /// `None` learns it from the gradient's S ([`symmetry_order_of`]).
     pub symmetry_order: Option<u32>,
+    /// Whether and how the gradient goes on learning from a task's pushes (off by
+    /// default: see [`OnlineLearningConfig`]).
+    pub online: OnlineLearningConfig,
 }
 
 impl Default for TrackerConfig {
@@ -73,6 +77,7 @@ impl Default for TrackerConfig {
             max_sigma: BORDER_MAX_SIGMA,
             capacity: 8192,
             symmetry_order: None,
+            online: OnlineLearningConfig::default(),
         }
     }
 }
@@ -137,16 +142,26 @@ pub enum TrackerError {
     /// The gradient's S gives no matcher (no border).
     #[error(transparent)]
     Matcher(#[from] ShapeMatcherBuildError),
+    /// The gradient cannot be learned on (its alphas or cell size).
+    #[error(transparent)]
+    Learner(#[from] agp_affordance::LearnerBuildError),
 }
 
-/// What the tracker keeps of a gradient: an owned copy, its combined S, the matcher on it.
+/// What the tracker keeps of a gradient: an owned copy (in its online learner, which
+/// leaves it as it is unless online learning is on), its combined S, the matcher on it.
 struct GradientState {
-    ag: AffordanceGradient,
+    learner: OnlineLearner,
     /// `ag.combined_shape()`, kept so that a push's predictor borrows it.
     shape: Grid,
     matcher: ShapeMatcher,
     start_radius_m: f64,
     symmetry_order: u32,
+}
+
+impl GradientState {
+    fn ag(&self) -> &AffordanceGradient {
+        self.learner.gradient()
+    }
 }
 
 /// A push under way: the robot's pose when contact was made and what was announced.
@@ -211,6 +226,16 @@ pub struct ObjectTracker {
     object_radius_m: Option<f64>,
 
     push: Option<PushStart>,
+
+    // Online learning.
+    /// Pushes since the last circling that matched.
+    pushes_since_match: u32,
+    /// The push under way, or ended, that is learned if a circling matches right after.
+    pending: Option<PendingPush>,
+    /// Counts the gradient's versions: 1 once given, +1 per push learned.
+    generation: u64,
+    /// The latest push learned.
+    last_learned: Option<LearnedPush>,
 }
 
 impl ObjectTracker {
@@ -258,6 +283,10 @@ impl ObjectTracker {
             centroid_valid: false,
             object_radius_m: None,
             push: None,
+            pushes_since_match: 0,
+            pending: None,
+            generation: 0,
+            last_learned: None,
             config,
         })
     }
@@ -283,8 +312,10 @@ impl ObjectTracker {
             .iter()
             .map(|p| p.length())
             .fold(0.0, f64::max);
+        self.generation += 1;
+        self.pending = None;
         self.gradient = Some(Box::new(GradientState {
-            ag: ag.clone(),
+            learner: OnlineLearner::new(ag, self.config.online)?,
             shape,
             matcher,
             start_radius_m: radius + self.robot.body_radius + self.config.start_gap_m,
@@ -293,9 +324,29 @@ impl ObjectTracker {
         Ok(())
     }
 
-    /// The gradient taken by [`ObjectTracker::set_gradient`], if any.
+    /// The gradient taken by [`ObjectTracker::set_gradient`], if any, as learned on since
+    /// (online learning).
     pub fn gradient(&self) -> Option<&AffordanceGradient> {
-        self.gradient.as_ref().map(|g| &g.ag)
+        self.gradient.as_ref().map(|g| g.ag())
+    }
+
+    /// The gradient's version: 0 without one, 1 once given by
+    /// [`ObjectTracker::set_gradient`] (each call counts on), and one more for each push
+    /// learned online. A publisher republishes the gradient when it advances.
+    pub fn gradient_generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// The latest push learned online, if any.
+    pub fn last_learned(&self) -> Option<&LearnedPush> {
+        self.last_learned.as_ref()
+    }
+
+    /// Pushes learned online since the gradient was given.
+    pub fn pushes_learned(&self) -> u64 {
+        self.gradient
+            .as_ref()
+            .map_or(0, |g| g.learner.pushes_learned())
     }
 
     /// The matcher's symmetry order (0 disc, 1 none, k: k-fold); `None` without a gradient.
@@ -410,6 +461,17 @@ impl ObjectTracker {
             Some(LearnEventKind::TaskCircleBegin) => self.begin_circling(),
             Some(LearnEventKind::TaskCircleEnd) => self.end_circling(event.flag == 1),
             Some(LearnEventKind::TaskPushBegin) => {
+                // Learnable when it starts from a pose a circling just matched.
+                self.pending = (event.flag == 1
+                    && self.pushes_since_match == 0
+                    && self.valid
+                    && self.sigma_xy == 0.0)
+                    .then(|| PendingPush {
+                        before: self.pose,
+                        contact_obj: DVec2::new(event.contact[0], event.contact[1]),
+                        alpha_deg: event.alpha_deg,
+                        scale: event.scale,
+                    });
                 self.push = Some(PushStart {
                     contact: self.robot_pose,
                     plan: (event.flag == 1).then(|| {
@@ -423,6 +485,7 @@ impl ObjectTracker {
             }
             Some(LearnEventKind::TaskPushEnd) => {
                 if let Some(start) = self.push.take() {
+                    self.pushes_since_match += 1;
                     self.end_push(start);
                 }
             }
@@ -451,7 +514,29 @@ impl ObjectTracker {
         if let Some(g) = self.gradient.as_mut() {
             let guess = self.valid.then_some(self.pose);
             if let Some(m) = match_pose(&mut g.matcher, &self.points, guess) {
-                self.pose = Pose2::new(m.position.x, m.position.y, m.orientation_rad);
+                let matched = Pose2::new(m.position.x, m.position.y, m.orientation_rad);
+                // Online learning: the one push since the last match, its effect observed.
+                if let Some(push) = self.pending.take()
+                    && self.pushes_since_match == 1
+                {
+                    let period = match g.symmetry_order {
+                        0 => 0.0,
+                        1 => f64::INFINITY,
+                        k => std::f64::consts::TAU / f64::from(k),
+                    };
+                    let GradientState {
+                        learner,
+                        shape,
+                        start_radius_m,
+                        ..
+                    } = &mut **g;
+                    if let Some(l) = learner.learn(push, matched, shape, *start_radius_m, period) {
+                        self.last_learned = Some(l);
+                        self.generation += 1;
+                    }
+                }
+                self.pushes_since_match = 0;
+                self.pose = matched;
                 self.sigma_xy = 0.0;
                 self.sigma_theta = 0.0;
                 self.valid = true;
@@ -489,7 +574,7 @@ impl ObjectTracker {
         if self.valid {
             let prediction = match (start.plan, self.gradient.as_deref()) {
                 (Some((aim, alpha_deg, scale)), Some(g)) => {
-                    PushPredictor::borrowing(&g.ag, &g.shape, g.start_radius_m)
+                    PushPredictor::borrowing(g.ag(), &g.shape, g.start_radius_m)
                         .predict(aim, alpha_deg)
                         .map(|p| Prediction {
                             displacement: p.displacement * scale,
@@ -626,6 +711,8 @@ impl ObjectTracker {
         self.centroid_valid = false;
         self.object_radius_m = None;
         self.push = None;
+        self.pushes_since_match = 0;
+        self.pending = None;
     }
 }
 

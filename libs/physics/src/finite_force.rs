@@ -63,7 +63,8 @@ use agp_world::{Pose, RobotDescription};
 use glam::DVec2;
 use rapier2d::math::{Pose as RPose, Vector as RVec};
 use rapier2d::prelude::{
-    GenericJointBuilder, JointAxesMask, JointAxis, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
+    GenericJointBuilder, ImpulseJointHandle, JointAxesMask, JointAxis, PhysicsWorld,
+    RigidBodyBuilder, RigidBodyHandle,
 };
 
 use crate::floor_friction::G;
@@ -221,6 +222,8 @@ impl WheelDrive {
 pub(crate) struct FloorHold {
     /// The force pair's carriers, then the torque pair's.
     carriers: [RigidBodyHandle; 4],
+    /// Their joints, in the same order.
+    joints: [ImpulseJointHandle; 4],
 }
 
 impl FloorHold {
@@ -238,14 +241,40 @@ impl FloorHold {
             (JointAxis::LinY, force / 2.0),
         ];
         let angular = [(JointAxis::AngX, torque / 2.0)];
-        let carriers = [&linear[..], &linear[..], &angular[..], &angular[..]].map(|axes| {
+        let built = [&linear[..], &linear[..], &angular[..], &angular[..]].map(|axes| {
             let carrier = world.insert_body(RigidBodyBuilder::kinematic_velocity_based().pose(
                 RPose::new(RVec::new(pose.x as f32, pose.y as f32), pose.theta as f32),
             ));
-            world.insert_impulse_joint(carrier, object, motors(axes, RPose::IDENTITY));
-            carrier
+            let joint = world.insert_impulse_joint(carrier, object, motors(axes, RPose::IDENTITY));
+            (carrier, joint)
         });
-        Self { carriers }
+        Self {
+            carriers: built.map(|b| b.0),
+            joints: built.map(|b| b.1),
+        }
+    }
+
+    /// Sets new bounds, `force` (N, along and across) and `torque` (N m), each pair's
+    /// joints holding half (the floor's friction or the object's mass changed). Changes
+    /// the joints: rapier recomputes its joint selection at the next step (a world change
+    /// is rare; the hot loop never calls this).
+    pub fn set_bounds(&self, world: &mut PhysicsWorld, force: f64, torque: f64) {
+        for (k, handle) in self.joints.into_iter().enumerate() {
+            if let Some(joint) = world.impulse_joints.get_mut(handle, true) {
+                if k < 2 {
+                    joint
+                        .data
+                        .set_motor_max_force(JointAxis::LinX, (force / 2.0) as f32);
+                    joint
+                        .data
+                        .set_motor_max_force(JointAxis::LinY, (force / 2.0) as f32);
+                } else {
+                    joint
+                        .data
+                        .set_motor_max_force(JointAxis::AngX, (torque / 2.0) as f32);
+                }
+            }
+        }
     }
 
     /// Puts the carriers on the object's centroid (`object`, its pose), turned to

@@ -61,6 +61,19 @@ impl FloorFriction {
         Self { cells, mu }
     }
 
+    /// The object's mass changed to `mass` (kg) and the floor's coefficient to `mu`: each
+    /// cell's load is rescaled (the footprint is the same). Allocates nothing.
+    pub fn set_mass_and_mu(&mut self, mass: f64, mu: f64) {
+        let total: f64 = self.cells.iter().map(|c| c.load).sum();
+        if total > 0.0 {
+            let k = mass * G / total;
+            for c in &mut self.cells {
+                c.load *= k;
+            }
+        }
+        self.mu = mu;
+    }
+
     /// The footprint's cells, in the object frame.
     pub fn cells(&self) -> &[FootprintCell] {
         &self.cells

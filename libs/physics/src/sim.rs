@@ -1,5 +1,5 @@
 use agp_shared_types::angle::wrap_angle;
-use agp_world::{ObjectShape, Pose, RobotDescription, RobotDrive, Scenario};
+use agp_world::{ObjectShape, Pose, RobotDescription, RobotDrive, Scenario, WorldChange};
 use glam::DVec2;
 use rapier2d::math::{Pose as RPose, Vector as RVec};
 use rapier2d::prelude::{
@@ -159,6 +159,12 @@ pub struct Sim {
     floor_hold: Option<FloorHold>,
     /// The robot's collider, for its contact with the object.
     robot_collider: ColliderHandle,
+    /// The object's first collider, which carries its whole mass and inertia.
+    object_mass_collider: Option<ColliderHandle>,
+    /// Moment of inertia per unit mass about the centroid, m^2.
+    inertia_per_mass: f64,
+    /// The scenario's `[[world_change]]`s not applied yet start at this index.
+    next_change: usize,
 }
 
 fn rpose(p: Pose) -> RPose {
@@ -261,13 +267,14 @@ impl Sim {
         // collider: rapier's contacts with a compound shape (parry's composite manifolds)
         // allocate on every step, convex pieces do not. The first piece carries the whole
         // plate's mass and inertia about the centroid, the others none.
+        let mut object_mass_collider = None;
         for (k, piece) in pieces.iter().enumerate() {
             let mass = if k == 0 {
                 MassProperties::new(RVec::ZERO, obj.mass as f32, object_inertia as f32)
             } else {
                 MassProperties::new(RVec::ZERO, 0.0, 0.0)
             };
-            world.insert_collider(
+            let handle = world.insert_collider(
                 ColliderBuilder::new(piece.clone())
                     .mass_properties(mass)
                     .friction(obj.contact_friction as f32)
@@ -275,6 +282,7 @@ impl Sim {
                     .restitution(0.0),
                 Some(object_body),
             );
+            object_mass_collider.get_or_insert(handle);
         }
         let object_pieces = pieces.len();
         let object_shape = if object_pieces == 1 {
@@ -327,6 +335,9 @@ impl Sim {
             wheel_drive,
             floor_hold,
             robot_collider,
+            object_mass_collider,
+            inertia_per_mass,
+            next_change: 0,
         };
         let (robot_pose, object_pose) = (sim.robot_pose, sim.object_pose());
         let (shape, range) = (&sim.object_shape, sim.sensors.max_range());
@@ -340,6 +351,7 @@ impl Sim {
     /// robot's maximum (a non-finite speed counts as 0). Allocates nothing unless a contact
     /// begins or ends (rapier then allocates for the pair; see vendor/rapier2d/PATCHES.md).
     pub fn step(&mut self, left_mps: f64, right_mps: f64) {
+        self.apply_due_changes();
         let travel = self.before_rapier(left_mps, right_mps);
         self.world.step();
         self.after_rapier(travel);
@@ -355,7 +367,14 @@ impl Sim {
                 0.0
             }
         };
-        let (l, r) = (clamp(left_mps), clamp(right_mps));
+        let (mut l, mut r) = (clamp(left_mps), clamp(right_mps));
+        if self.wheel_drive.is_some() {
+            // The finite-force robot's motor controller ramps each wheel towards the
+            // command (`wheel_accel` of the robot file); odometry counts the ramped steps.
+            let dv = self.robot.wheel_accel * self.dt;
+            l = self.wheels.0 + (l - self.wheels.0).clamp(-dv, dv);
+            r = self.wheels.1 + (r - self.wheels.1).clamp(-dv, dv);
+        }
         self.wheels = (l, r);
         // Odometry counts these commanded travels, whatever the body does.
         let travel = (l * self.dt, r * self.dt);
@@ -399,6 +418,55 @@ impl Sim {
             }
         }
         travel
+    }
+
+    /// Applies the scenario's world changes whose time has come (at the first step at or
+    /// after their `at_s`). Allocates nothing while none is due.
+    fn apply_due_changes(&mut self) {
+        while let Some(&change) = self.scenario.world_changes.get(self.next_change) {
+            if self.sim_time() + 0.5 * self.dt < change.at_s {
+                break;
+            }
+            self.next_change += 1;
+            self.apply_world_change(change);
+        }
+    }
+
+    /// Changes the world now, whatever the change's `at_s`: the floor's friction under the
+    /// object and/or the object's mass (its inertia with it, and the floor's load).
+    /// [`Sim::step`] applies the scenario's `[[world_change]]`s by itself; this is for a
+    /// harness that changes the world by hand. [`Sim::scenario`] reflects the change.
+    pub fn apply_world_change(&mut self, change: WorldChange) {
+        let object = &mut self.scenario.object;
+        if let Some(mu) = change.floor_friction {
+            object.floor_friction = mu;
+        }
+        if let Some(mass) = change.mass_kg {
+            object.mass = mass;
+            self.object_inertia = mass * self.inertia_per_mass;
+            if let Some(c) = self
+                .object_mass_collider
+                .and_then(|h| self.world.colliders.get_mut(h))
+            {
+                c.set_mass_properties(MassProperties::new(
+                    RVec::ZERO,
+                    mass as f32,
+                    self.object_inertia as f32,
+                ));
+            }
+        }
+        let (mass, mu) = (object.mass, object.floor_friction);
+        if let Some(floor) = &mut self.floor {
+            floor.set_mass_and_mu(mass, mu);
+            if let Some(hold) = &self.floor_hold {
+                hold.set_bounds(&mut self.world, floor.max_force(), floor.max_torque());
+            }
+        }
+    }
+
+    /// How many of the scenario's `[[world_change]]`s were applied so far.
+    pub fn world_changes_applied(&self) -> usize {
+        self.next_change
     }
 
     /// Counts the step and takes the samples that fall due.
@@ -538,8 +606,9 @@ impl Sim {
         self.sensors.state()
     }
 
-    /// The wheel speeds commanded at the last step, after clamping (m/s): what the
-    /// steppers turn at and odometry counts. The finite-force robot's body may move slower
+    /// The wheel speeds commanded at the last step, after clamping (and, for the
+    /// finite-force robot, the motor controller's ramp) (m/s): what the steppers turn at
+    /// and odometry counts. The finite-force robot's body may move slower
     /// (see [`Sim::wheel_slip`]).
     pub fn wheel_speeds(&self) -> (f64, f64) {
         self.wheels

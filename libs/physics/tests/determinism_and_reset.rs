@@ -110,10 +110,29 @@ fn reset_puts_object_and_robot_where_asked_and_odometry_at_the_robot() {
 
 #[test]
 fn wheel_speeds_are_clamped_to_the_robots_maximum() {
-    let mut s: Sim = sim(&quiet("square"));
+    let mut s: Sim = sim(&quiet_kinematic("square"));
     s.reset(Pose::new(2.0, 2.0, 0.0), Pose::default());
     s.step(5.0, f64::NAN);
     assert_eq!(s.wheel_speeds(), (0.128, 0.0));
     s.step(-5.0, -5.0);
     assert_eq!(s.wheel_speeds(), (-0.128, -0.128));
+}
+
+#[test]
+fn the_finite_force_robots_wheels_ramp_to_the_clamped_command_at_the_stated_rate() {
+    let mut s: Sim = sim(&quiet("square"));
+    s.reset(Pose::new(2.0, 2.0, 0.0), Pose::default());
+    let dv = s.robot().wheel_accel * s.dt();
+    // 0.128 m/s at 3 m/s^2 and 640 Hz: 27.3 steps of 4.7 mm/s each.
+    let steps = (0.128 / dv).ceil() as usize;
+    for k in 1..=steps + 5 {
+        s.step(5.0, f64::NAN);
+        let (l, r) = s.wheel_speeds();
+        let want = (k as f64 * dv).min(0.128);
+        assert!((l - want).abs() < 1e-12 && r == 0.0, "step {k}: {l} {r}");
+    }
+    // A reversal ramps down through zero at the same rate.
+    s.step(-5.0, -5.0);
+    let (l, r) = s.wheel_speeds();
+    assert!((l - (0.128 - dv)).abs() < 1e-12 && (r + dv).abs() < 1e-12);
 }

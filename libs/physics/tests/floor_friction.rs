@@ -1,5 +1,7 @@
 //! The floor-friction checks of robot-and-world.md, against the quasi-static pushing model
-//! (Mason, Lynch) and against closed-form sliding.
+//! (Mason, Lynch) and against closed-form sliding. The pusher is the kinematic robot, which
+//! moves exactly as commanded, so that the closed forms hold; the finite-force robot's own
+//! checks are in `finite_force.rs`.
 
 mod common;
 
@@ -18,7 +20,7 @@ const NO_ROTATION: f64 = 1e-4;
 /// Pushes the object, starting at rest at the origin, with the robot driving straight at
 /// `speed` from `robot` for `seconds`, then stops the robot and lets the object settle.
 fn push(name: &str, robot: Pose, speed: f64, seconds: f64) -> Sim {
-    let mut s = placed(&quiet(name), Pose::default(), robot);
+    let mut s = placed(&quiet_kinematic(name), Pose::default(), robot);
     drive(&mut s, speed, seconds);
     assert!(settle(&mut s, 1.0), "the {name} came to rest");
     s
@@ -77,7 +79,11 @@ fn an_offset_push_turns_the_object_towards_the_side_not_pushed_more_for_a_larger
 #[test]
 fn once_the_robot_stops_the_object_stops_within_a_few_millimetres() {
     let v = 0.128; // the robot's top speed
-    let mut s = placed(&quiet("square"), Pose::default(), Pose::new(-0.1, 0.0, 0.0));
+    let mut s = placed(
+        &quiet_kinematic("square"),
+        Pose::default(),
+        Pose::new(-0.1, 0.0, 0.0),
+    );
     drive(&mut s, v, 1.5);
     let at_stop = s.object_pose();
     let dt = s.dt();
@@ -105,7 +111,7 @@ fn once_the_robot_stops_the_object_stops_within_a_few_millimetres() {
 
     // A turning object (offset push) stops within a few millimetres too.
     let mut s = placed(
-        &quiet("square"),
+        &quiet_kinematic("square"),
         Pose::default(),
         Pose::new(-0.1, 0.015, 0.0),
     );
@@ -147,7 +153,7 @@ fn a_kicked_object_slides_v0_squared_over_2_mu_g_and_never_reverses() {
     for name in ["square", "triangle", "lshape", "circle"] {
         // Robot far away (0.7 m), object turned 0.3 rad: friction must not care.
         let mut s = placed(
-            &quiet(name),
+            &quiet_kinematic(name),
             Pose::new(0.0, 0.0, 0.3),
             Pose::new(-0.5, 0.5, 0.0),
         );
@@ -188,7 +194,11 @@ fn a_spinning_disc_stops_after_the_analytic_angle() {
     // Uniform disc: friction torque (2/3) mu m g R, inertia m R^2 / 2, so it decelerates
     // at alpha = 4 mu g / (3 R) and turns w0^2 / (2 alpha) before stopping.
     let (w0, r) = (30.0, 0.035);
-    let mut s = placed(&quiet("circle"), Pose::default(), Pose::new(-0.5, 0.5, 0.0));
+    let mut s = placed(
+        &quiet_kinematic("circle"),
+        Pose::default(),
+        Pose::new(-0.5, 0.5, 0.0),
+    );
     s.set_object_velocity(DVec2::ZERO, w0);
     assert!(settle(&mut s, 1.0));
     let expected = w0 * w0 / (2.0 * 4.0 * MU_G / (3.0 * r));
@@ -215,7 +225,12 @@ fn a_damping_floor_slows_an_object_exponentially() {
         },
         ..SimConfig::default()
     };
-    let mut s = Sim::new(&quiet("square"), &RobotDescription::epuck(), config).unwrap();
+    let mut s = Sim::new(
+        &quiet_kinematic("square"),
+        &RobotDescription::epuck(),
+        config,
+    )
+    .unwrap();
     s.reset(Pose::default(), Pose::new(-0.5, 0.5, 0.0));
     s.set_object_velocity(DVec2::new(0.2, 0.0), 0.0);
     drive(&mut s, 0.0, 1.0);

@@ -20,7 +20,10 @@ pub use learning_protocol::{
     ALPHAS_DEG, Disruption, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
     LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun, max_object_reach_m,
 };
-pub use push_choice::{Goal, PushChoiceSettings, PushPlan, PushPlanner, symmetric_angle_error};
+pub use push_choice::{
+    Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at,
+    path_projection, symmetric_angle_error,
+};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use travel::{
     TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, orbit_waypoints_into,

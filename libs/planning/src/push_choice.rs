@@ -270,6 +270,155 @@ impl<'a> PushPlanner<'a> {
     }
 }
 
+/// What a push along a path is after (see [`PushPlanner::plan_along`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathFollowing<'p> {
+    /// The polyline to follow, world frame, m.
+    pub path: &'p [DVec2],
+    /// Push lengths tried, fractions of the learned push (as
+    /// [`PushChoiceSettings::push_fractions`]; along a path shorter pushes keep closer).
+    pub push_fractions: &'p [f64],
+    /// How far along the path (m) one push should bring the centroid: pushes that advance
+    /// less, or more, pay for the difference (see `progress_weight`). Near the path's end,
+    /// what is left of it.
+    pub advance_m: f64,
+    /// Metres of cost per metre of the predicted centroid track's mean distance to the
+    /// path over the push (the predicted end's distance counts once more on its own).
+    pub track_weight: f64,
+    /// Metres of cost per metre the push advances short of (or past) `advance_m`.
+    pub progress_weight: f64,
+    /// Keep the object's heading (its frame's x axis) to the path's tangent within this
+    /// (rad): the predicted end's orientation is compared with the tangent where it ends,
+    /// modulo the symmetry, and each radian beyond the tolerance costs `heading_weight`.
+    pub heading_tolerance_rad: Option<f64>,
+    /// Metres of cost per radian of heading beyond its tolerance.
+    pub heading_weight_m_per_rad: f64,
+}
+
+/// The arc length (m) along `path` of the point of it closest to `p`, and the distance
+/// (m) of `p` to it.
+pub fn path_projection(path: &[DVec2], p: DVec2) -> (f64, f64) {
+    let (mut best_d, mut best_s, mut s0) = (f64::INFINITY, 0.0, 0.0);
+    for w in path.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let ab = b - a;
+        let len = ab.length();
+        let t = if len > 1e-12 {
+            ((p - a).dot(ab) / (len * len)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + t * ab - p).length();
+        if d < best_d {
+            best_d = d;
+            best_s = s0 + t * len;
+        }
+        s0 += len;
+    }
+    if path.len() == 1 {
+        return (0.0, (p - path[0]).length());
+    }
+    (best_s, best_d)
+}
+
+/// The direction (rad) of `path` at arc length `s` (its last segment's beyond the end).
+pub fn path_direction_at(path: &[DVec2], s: f64) -> f64 {
+    let mut left = s;
+    let mut last = 0.0;
+    for w in path.windows(2) {
+        let d = w[1] - w[0];
+        let len = d.length();
+        if len <= 1e-12 {
+            continue;
+        }
+        last = d.to_angle();
+        if left <= len {
+            return last;
+        }
+        left -= len;
+    }
+    last
+}
+
+impl PushPlanner<'_> {
+    /// The push that carries the centroid along `follow.path`: every candidate push
+    /// (contact, alpha, length) is scored on the AG's prediction by the predicted centroid
+    /// track's distance to the path (its straight run from the estimate to the predicted
+    /// end, sampled at four points), the end's distance once more, how far short of (or
+    /// past) `advance_m` along the path it ends, the prediction's risk and turn (as
+    /// [`PushPlanner::score`] weighs them) and, when the heading is asked for, the end
+    /// heading's error beyond its tolerance. `None` if the AG predicts nothing anywhere.
+    pub fn plan_along(&self, estimate: Pose2, follow: &PathFollowing<'_>) -> Option<PushPlan> {
+        let s = &self.settings;
+        let c0 = DVec2::new(estimate.x, estimate.y);
+        let (s0, _) = path_projection(follow.path, c0);
+        let rot = DVec2::from_angle(estimate.theta);
+        let mut best: Option<PushPlan> = None;
+        let predictions = self.predictions.chunks_exact(self.alphas.len().max(1));
+        for (&c, row) in self.contacts.iter().zip(predictions) {
+            for (&alpha, p) in self.alphas.iter().zip(row) {
+                let Some(p) = *p else {
+                    continue;
+                };
+                if p.confidence < s.min_confidence {
+                    continue;
+                }
+                for &f in follow.push_fractions {
+                    let scale = (f + s.fraction_offset) / (1.0 + s.fraction_offset);
+                    let moved = rot.rotate(p.displacement * scale);
+                    let c1 = c0 + moved;
+                    let mut track = 0.0;
+                    for k in 1..=4 {
+                        track += path_projection(follow.path, c0 + moved * (f64::from(k) / 4.0)).1;
+                    }
+                    let (s1, d1) = path_projection(follow.path, c1);
+                    let rotation = p.rotation_rad * scale;
+                    let risk = s.spread_weight
+                        * scale
+                        * (p.displacement_spread_m + s.spread_lever_m * p.rotation_spread_rad);
+                    let heading = follow.heading_tolerance_rad.map_or(0.0, |tolerance| {
+                        let want = path_direction_at(follow.path, s1);
+                        let off = symmetric_angle_error(
+                            estimate.theta + rotation - want,
+                            s.symmetry_order,
+                        )
+                        .abs();
+                        follow.heading_weight_m_per_rad * (off - tolerance).max(0.0)
+                    });
+                    let cost = follow.track_weight * track / 4.0
+                        + d1
+                        + follow.progress_weight * (s1 - s0 - follow.advance_m).abs()
+                        + risk
+                        + s.reach_rotation_weight_m_per_rad * rotation.abs()
+                        + heading;
+                    if best.is_some_and(|b| b.cost <= cost) {
+                        continue;
+                    }
+                    let Some((start, h)) = approach_start(c, alpha, s.start_radius_m) else {
+                        continue;
+                    };
+                    let sw = c0 + rot.rotate(start);
+                    let scaled = Prediction {
+                        displacement: p.displacement * scale,
+                        rotation_rad: rotation,
+                        ..p
+                    };
+                    best = Some(PushPlan {
+                        contact_obj: c,
+                        alpha_deg: alpha,
+                        fraction: f,
+                        prediction: scaled,
+                        predicted: scaled.apply_to(estimate),
+                        cost,
+                        start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
+                    });
+                }
+            }
+        }
+        best
+    }
+}
+
 /// `angle` (radians) wrapped to the nearest equivalent under a symmetry of `order`
 /// (0: every angle is equivalent, the error is 0; 1: none, wrap to (-pi, pi]).
 pub fn symmetric_angle_error(angle: f64, order: u32) -> f64 {
@@ -283,6 +432,34 @@ pub fn symmetric_angle_error(angle: f64, order: u32) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_point_projects_on_the_closest_segment_at_its_arc_length() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.2)];
+        let (s, d) = path_projection(&path, DVec2::new(0.1, 0.02));
+        assert!(
+            (s - 0.1).abs() < 1e-12 && (d - 0.02).abs() < 1e-12,
+            "{s} {d}"
+        );
+        // Beside the second leg: 0.3 along the first, 0.05 up the second.
+        let (s, d) = path_projection(&path, DVec2::new(0.33, 0.05));
+        assert!(
+            (s - 0.35).abs() < 1e-12 && (d - 0.03).abs() < 1e-12,
+            "{s} {d}"
+        );
+        // Before the start: the start, at its distance.
+        let (s, d) = path_projection(&path, DVec2::new(-0.03, 0.04));
+        assert!(s.abs() < 1e-12 && (d - 0.05).abs() < 1e-12, "{s} {d}");
+    }
+
+    #[test]
+    fn the_path_direction_is_its_segments_and_the_last_beyond_the_end() {
+        let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.2)];
+        assert_eq!(path_direction_at(&path, 0.1), 0.0);
+        let up = std::f64::consts::FRAC_PI_2;
+        assert!((path_direction_at(&path, 0.4) - up).abs() < 1e-12);
+        assert!((path_direction_at(&path, 2.0) - up).abs() < 1e-12);
+    }
 
     #[test]
     fn orientation_errors_wrap_by_the_objects_symmetry() {

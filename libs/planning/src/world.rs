@@ -5,6 +5,7 @@
 //! library in-process (feature `sim`, for tests and examples). Ground truth is behind
 //! [`World::object_truth`], which only the `oracle` and the evaluation call.
 
+use agp_affordance::AffordanceGradient;
 use agp_shared_types::{IR_SENSOR_COUNT, LearnEvent, ObjectEstimate};
 use agp_world::Pose;
 
@@ -62,4 +63,11 @@ pub trait World {
     /// The object's true pose now, where the world offers it: the `oracle`'s input and the
     /// evaluation's, nobody else's. `None` in the pipeline unless connected for the oracle.
     fn object_truth(&self) -> Option<Pose>;
+    /// A newer gradient than the one the episode plans on, when the estimator learned on
+    /// from the task's pushes and published it again (online learning); asked between
+    /// two pushes, and the next pushes are planned on it. `None` (the default): the
+    /// gradient the episode started with stays.
+    fn newer_gradient(&mut self) -> Option<AffordanceGradient> {
+        None
+    }
 }

@@ -23,9 +23,9 @@ pub use robot::{
 };
 pub use scenario::{
     ARENA_HALF_SIZE_MM, BUILTIN_NAMES, Experimenter, Localization, MAX_POLYGON_VERTICES,
-    MAX_POSE_ANGLE_DEG, MAX_SCENARIO_NAME_LEN, MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape,
-    ObjectSpec, Pose, RobotDrive, RobotSetup, Scenario, ScenarioBrief, ScenarioLoadError, TaskKind,
-    TaskSpec,
+    MAX_POSE_ANGLE_DEG, MAX_SCENARIO_NAME_LEN, MAX_WORLD_CHANGE_AT_S, MAX_WORLD_CHANGES,
+    MIN_OBJECT_AREA_MM2, OBJECT_RADIUS_MM, ObjectShape, ObjectSpec, Pose, RobotDrive, RobotSetup,
+    Scenario, ScenarioBrief, ScenarioLoadError, TaskKind, TaskSpec, WorldChange,
 };
 
 /// 1-based line number of byte offset `offset` in `text`.

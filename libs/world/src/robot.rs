@@ -173,6 +173,10 @@ pub struct RobotDescription {
     /// (pull-out torque after the gearbox), N m. The finite-force drive's motor limit: at
     /// most `wheel_torque / wheel_radius` of pull per wheel.
     pub wheel_torque: f64,
+    /// The finite-force drive's motor controller ramps each wheel's speed towards the
+    /// command at most this fast, m/s^2 (as stepper drivers do, to keep from losing steps);
+    /// odometry counts the ramped steps. The kinematic robot does not ramp.
+    pub wheel_accel: f64,
 }
 
 /// Why a robot description could not be loaded.
@@ -206,6 +210,7 @@ struct RobotFile {
     wheel_friction: Spanned<f64>,
     #[serde(rename = "wheel_torque_mNm")]
     wheel_torque_mnm: Spanned<f64>,
+    wheel_accel_mm_s2: Spanned<f64>,
     ir_sensors: Vec<SensorFile>,
     response: ResponseFile,
 }
@@ -215,6 +220,8 @@ struct RobotFile {
 /// is an estimated 25; 1000 would lift a 20 mm wheel's robot off the floor many times).
 pub const WHEEL_FRICTION_RANGE: (f64, f64) = (0.01, 2.0);
 pub const WHEEL_TORQUE_MNM_RANGE: (f64, f64) = (0.01, 1000.0);
+/// Bounds of the wheel's speed ramp, mm/s^2: from a crawl to far beyond any traction.
+pub const WHEEL_ACCEL_MM_S2_RANGE: (f64, f64) = (1.0, 1.0e6);
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -303,6 +310,12 @@ impl RobotDescription {
             WHEEL_TORQUE_MNM_RANGE,
             " mN m",
         )?;
+        let wheel_accel_mm_s2 = at_line(
+            "wheel_accel_mm_s2",
+            &file.wheel_accel_mm_s2,
+            WHEEL_ACCEL_MM_S2_RANGE,
+            " mm/s^2",
+        )?;
         let response = ResponseCurve::new(
             file.response
                 .rows
@@ -331,6 +344,7 @@ impl RobotDescription {
             response,
             wheel_friction,
             wheel_torque: wheel_torque_mnm * 1e-3,
+            wheel_accel: wheel_accel_mm_s2 * 1e-3,
         })
     }
 

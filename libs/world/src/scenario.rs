@@ -107,14 +107,15 @@ pub struct Localization {
 /// How physics moves the robot (a scenario's `[robot] drive`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum RobotDrive {
-    /// `"kinematic"` (the default): the body follows the commanded wheel speeds exactly,
-    /// with unbounded force; it never stalls and its wheels never slip.
-    #[default]
+    /// `"kinematic"`: the body follows the commanded wheel speeds exactly, with unbounded
+    /// force; it never stalls and its wheels never slip. For comparison with the earlier
+    /// figures and for the analytic tests of the push itself.
     Kinematic,
-    /// `"finite-force"`: a dynamic body driven by two stepper wheels, each pulling at most
-    /// the smaller of its traction (`wheel_friction` times its share of the weight) and its
-    /// motor's (`wheel_torque / wheel_radius`) of the robot file: a heavy object stalls it,
-    /// its wheels slip and odometry, which counts commanded steps, drifts.
+    /// `"finite-force"` (the default): a dynamic body driven by two stepper wheels, each
+    /// pulling at most the smaller of its traction (`wheel_friction` times its share of the
+    /// weight) and its motor's (`wheel_torque / wheel_radius`) of the robot file: a heavy
+    /// object stalls it, its wheels slip and odometry, which counts commanded steps, drifts.
+    #[default]
     FiniteForce,
 }
 
@@ -185,7 +186,28 @@ pub struct Scenario {
     pub object: ObjectSpec,
     pub robot: RobotSetup,
     pub task: TaskSpec,
+    /// Changes of the world at given simulated times (`[[world_change]]`), in order of
+    /// time: ground truth, applied by physics alone.
+    pub world_changes: Vec<WorldChange>,
 }
+
+/// A change of the world at a given simulated time (a scenario's `[[world_change]]`): the
+/// floor's friction under the object, the object's mass, or both. Ground truth: physics
+/// applies it, the judge may read it, the estimator and the planners never see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldChange {
+    /// Simulated time since physics started, s.
+    pub at_s: f64,
+    /// The object-floor Coulomb coefficient from then on.
+    pub floor_friction: Option<f64>,
+    /// The object's mass from then on, kg.
+    pub mass_kg: Option<f64>,
+}
+
+/// Most `[[world_change]]` entries a scenario may hold.
+pub const MAX_WORLD_CHANGES: usize = 64;
+/// Latest `at_s` of a world change, s (a day of simulated time).
+pub const MAX_WORLD_CHANGE_AT_S: f64 = 86_400.0;
 
 /// What the estimator and the planners may read of a scenario: its name (which AG file),
 /// the robot's start and the noise of its senses, and the task. Nothing of the object: its
@@ -279,6 +301,18 @@ struct ScenarioFile {
     robot: Option<RobotFile>,
     #[serde(default)]
     task: Option<TaskFile>,
+    #[serde(default)]
+    world_change: Vec<Spanned<WorldChangeFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorldChangeFile {
+    at_s: Spanned<f64>,
+    #[serde(default)]
+    floor_friction: Option<Spanned<f64>>,
+    #[serde(default)]
+    mass_kg: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -595,12 +629,15 @@ impl Scenario {
             ));
         }
 
+        let world_changes = world_changes(&file.world_change, &err)?;
+
         Ok(Scenario {
             name,
             source: "built-in".into(),
             object,
             robot,
             task,
+            world_changes,
         })
     }
 }
@@ -792,6 +829,81 @@ fn localization(
     }
 }
 
+/// The `[[world_change]]` entries, checked: each at a finite time from 0 to
+/// [`MAX_WORLD_CHANGE_AT_S`], in order of time, changing the floor friction and/or the
+/// mass within the bounds of the `[object]` keys of the same names.
+fn world_changes(
+    entries: &[Spanned<WorldChangeFile>],
+    err: &ErrFn,
+) -> Result<Vec<WorldChange>, ScenarioLoadError> {
+    if entries.len() > MAX_WORLD_CHANGES {
+        return Err(err(
+            entries[MAX_WORLD_CHANGES].span(),
+            format!(
+                "{} `[[world_change]]` entries, at most {MAX_WORLD_CHANGES} allowed",
+                entries.len()
+            ),
+        ));
+    }
+    let mut out = Vec::with_capacity(entries.len());
+    for entry in entries {
+        let c = entry.get_ref();
+        let at_s = *c.at_s.get_ref();
+        if !(at_s.is_finite() && (0.0..=MAX_WORLD_CHANGE_AT_S).contains(&at_s)) {
+            return Err(err(
+                c.at_s.span(),
+                format!(
+                    "`world_change.at_s` must be a non-negative number of at most {MAX_WORLD_CHANGE_AT_S} s, got {at_s}"
+                ),
+            ));
+        }
+        if let Some(prev) = out.last().map(|p: &WorldChange| p.at_s)
+            && at_s < prev
+        {
+            return Err(err(
+                c.at_s.span(),
+                format!(
+                    "`world_change.at_s` is {at_s} s, before the previous change's {prev} s: list the changes in order of time"
+                ),
+            ));
+        }
+        if c.floor_friction.is_none() && c.mass_kg.is_none() {
+            return Err(err(
+                entry.span(),
+                "a `[[world_change]]` changes nothing: give `floor_friction` and/or `mass_kg`"
+                    .into(),
+            ));
+        }
+        let floor_friction = match &c.floor_friction {
+            Some(v) => Some(*non_negative_within(
+                v,
+                "world_change.floor_friction",
+                MAX_FRICTION,
+                "",
+                err,
+            )?),
+            None => None,
+        };
+        let mass_kg = match &c.mass_kg {
+            Some(v) => Some(*positive_within(
+                v,
+                "world_change.mass_kg",
+                MASS_KG.0,
+                MASS_KG.1,
+                "kg",
+                err,
+            )?),
+            None => None,
+        };
+        out.push(WorldChange {
+            at_s,
+            floor_friction,
+            mass_kg,
+        });
+    }
+    Ok(out)
+}
+
 fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
     let kind = match t.kind.get_ref().as_str() {
         "learn" => TaskKind::Learn,
@@ -944,10 +1056,10 @@ mod tests {
     }
 
     #[test]
-    fn the_drive_is_kinematic_unless_the_scenario_asks_for_finite_force() {
+    fn the_drive_is_finite_force_unless_the_scenario_asks_for_the_kinematic_robot() {
         for name in BUILTIN_NAMES {
             let s = Scenario::builtin(name).unwrap();
-            assert_eq!(s.robot.drive, RobotDrive::Kinematic);
+            assert_eq!(s.robot.drive, RobotDrive::FiniteForce);
         }
         let base = include_str!("../scenarios/triangle.toml");
         let text = base.replace("[robot]\n", "[robot]\ndrive = \"finite-force\"\n");
@@ -981,5 +1093,89 @@ mod tests {
             panic!()
         };
         assert!(p.centroid().length() < 1e-12);
+    }
+
+    fn with_world_changes(extra: &str) -> String {
+        format!("{}\n{extra}", include_str!("../scenarios/triangle.toml"))
+    }
+
+    #[test]
+    fn world_changes_are_read_in_si_units_in_order_of_time() {
+        let text = with_world_changes(
+            "[[world_change]]\nat_s = 12.5\nfloor_friction = 0.25\n\n[[world_change]]\nat_s = 30\nmass_kg = 0.3\nfloor_friction = 0.1\n",
+        );
+        let s = Scenario::parse(&text, "w.toml").expect("valid");
+        assert_eq!(
+            s.world_changes,
+            vec![
+                WorldChange {
+                    at_s: 12.5,
+                    floor_friction: Some(0.25),
+                    mass_kg: None
+                },
+                WorldChange {
+                    at_s: 30.0,
+                    floor_friction: Some(0.1),
+                    mass_kg: Some(0.3)
+                },
+            ]
+        );
+        // None by default, and never in what the estimator and the planners get.
+        assert!(
+            Scenario::builtin("triangle")
+                .unwrap()
+                .world_changes
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn a_bad_world_change_is_refused_with_its_file_line_and_reason() {
+        let cases = [
+            (
+                "[[world_change]]\nat_s = -1\nmass_kg = 0.2\n",
+                "at_s = -1",
+                "`world_change.at_s` must be a non-negative number",
+            ),
+            (
+                "[[world_change]]\nat_s = nan\nmass_kg = 0.2\n",
+                "at_s = nan",
+                "`world_change.at_s` must be a non-negative number",
+            ),
+            (
+                "[[world_change]]\nat_s = 5\nfloor_friction = 2.5\n",
+                "floor_friction = 2.5",
+                "`world_change.floor_friction` must be a non-negative number of at most 2",
+            ),
+            (
+                "[[world_change]]\nat_s = 5\nmass_kg = 0\n",
+                "mass_kg = 0",
+                "`world_change.mass_kg` must be a positive number from 0.001 to 10 kg",
+            ),
+            (
+                "[[world_change]]\nat_s = 5\nfriction = 0.2\n",
+                "friction = 0.2",
+                "unknown field `friction`",
+            ),
+            (
+                "[[world_change]]\nat_s = 5\nmass_kg = 0.2\n[[world_change]]\nat_s = 4\nmass_kg = 0.3\n",
+                "at_s = 4",
+                "before the previous change's 5 s",
+            ),
+            (
+                "[[world_change]]\nat_s = 5\n",
+                "[[world_change]]",
+                "changes nothing",
+            ),
+        ];
+        for (extra, at, reason) in cases {
+            let text = with_world_changes(extra);
+            let line = text.lines().position(|l| l == at).expect("the bad line") + 1;
+            let msg = Scenario::parse(&text, "bad.toml").unwrap_err().to_string();
+            assert!(
+                msg.starts_with(&format!("bad.toml:{line}: ")) && msg.contains(reason),
+                "{extra:?}: {msg}"
+            );
+        }
     }
 }

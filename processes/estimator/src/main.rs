@@ -25,7 +25,8 @@ use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
 use agp_perception::{
-    IrView, LearnProblem, LearningConfig, ObjectTracker, ProtocolLearner, TrackerConfig,
+    IrView, LearnProblem, LearningConfig, ObjectTracker, OnlineLearningConfig, ProtocolLearner,
+    TrackerConfig,
 };
 use agp_runtime::{
     AgpIpc, Instance, WaitOutcome, WaitStrategy, Waiter, alloc_count, install_shutdown_handler,
@@ -73,6 +74,13 @@ struct Args {
     /// centroid; no pose without a gradient.
     #[arg(long, conflicts_with_all = ["load", "reuse"])]
     perceive_only: bool,
+    /// Learn on from every push of a task whose effect a circling observes (weighted
+    /// towards recent pushes, see `agp_perception::OnlineLearner`) and publish the grids
+    /// again after each: the planner plans its next pushes on them. Off by default: the
+    /// paper's tasks plan on the gradient of the learning phase, and every figure measured
+    /// so far is of a frozen gradient.
+    #[arg(long, env = "AGP_LEARN_ONLINE")]
+    learn_online: bool,
     /// Exit with an error when neither a frame nor an event arrives for this long,
     /// seconds; 0 waits until SIGTERM.
     #[arg(long, default_value_t = 0)]
@@ -188,6 +196,7 @@ fn run() -> Result<()> {
         if let Some(gradient) = estimator.state.finished.take() {
             estimator.finish(&gradient)?;
         }
+        estimator.republish_learned()?;
         if let Some(failed) = estimator.save_failed.take() {
             // The planner has the `Learned` report saying so; give it a moment to read it
             // before this process (and its publishers) goes.
@@ -205,6 +214,8 @@ struct Estimator {
     grids: Publisher<AgpIpc, GradientGrid, ()>,
     grids_wake: Notifier<AgpIpc>,
     grids_seq: u64,
+    /// The tracker's gradient generation last published (online learning).
+    published_generation: u64,
     results: PathBuf,
     object: String,
     /// Set when the AG file could not be saved: the process ends with this error.
@@ -305,7 +316,16 @@ impl Estimator {
             finished: None,
             grids_seq: 0,
             start_ns: monotonic_ns(),
-            tracker: ObjectTracker::new(&RobotDescription::epuck(), TrackerConfig::default()),
+            tracker: ObjectTracker::new(
+                &RobotDescription::epuck(),
+                TrackerConfig {
+                    online: OnlineLearningConfig {
+                        enabled: args.learn_online,
+                        ..OnlineLearningConfig::default()
+                    },
+                    ..TrackerConfig::default()
+                },
+            ),
             task_session: 0,
             last_step: None,
             last_reset: None,
@@ -330,6 +350,7 @@ impl Estimator {
                 .create()
                 .map_err(open_err("the grid notifier"))?,
             grids_seq: 0,
+            published_generation: 0,
             results: args.results.clone(),
             object: scenario.name.clone(),
             save_failed: None,
@@ -369,44 +390,43 @@ impl Estimator {
     }
 
     /// Publishes every grid of `gradient` (every [`GridKind`] of every alpha: one set), each
-    /// written once straight into its loaned sample.
+    /// written once straight into its loaned sample, and gives it to the tracker.
     fn publish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
-        let alphas = gradient.alphas_deg().count();
-        if alphas > MAX_GRID_ALPHAS {
-            bail!(
-                "the gradient has {alphas} alphas; the grids topic holds a set of at most {MAX_GRID_ALPHAS}"
-            );
-        }
         self.grids_seq += 1;
-        let seq = self.grids_seq;
-        for alpha in gradient.alphas_deg() {
-            for kind in GridKind::ALL {
-                let sample = self
-                    .grids
-                    .loan_uninit()
-                    .map_err(|e| anyhow!("cannot loan a grid sample: {e:?}"))?;
-                // SAFETY: the sample is shared memory mapped from a file: its bytes are
-                // always initialised (zeros, or an older sample's), and every bit pattern
-                // is a valid `GradientGrid` (integers and floats only, no padding), so
-                // taking it as initialised reads nothing undefined. `write_component`
-                // then overwrites the header and every cell.
-                let mut sample = unsafe { sample.assume_init() };
-                gradient
-                    .write_component(alpha, kind, seq, sample.payload_mut())
-                    .map_err(|e| anyhow!("cannot write a grid: {e}"))?;
-                sample
-                    .send()
-                    .map_err(|e| anyhow!("cannot send a grid: {e:?}"))?;
-            }
-        }
+        publish_grids(&self.grids, gradient, self.grids_seq)?;
         let _ = self.grids_wake.notify();
-        self.state.grids_seq = seq;
+        self.state.grids_seq = self.grids_seq;
         if let Err(e) = self.state.tracker.set_gradient(gradient) {
             eprintln!(
                 "agp-estimator: the gradient of `{}` cannot locate the object in a task: {e}",
                 self.object
             );
         }
+        self.published_generation = self.state.tracker.gradient_generation();
+        Ok(())
+    }
+
+    /// Online learning: when the tracker learned a push since the last publication, its
+    /// gradient is published again as a new set (the next seq); the estimates carry the
+    /// new seq from the next frame on, which tells the planner.
+    fn republish_learned(&mut self) -> Result<()> {
+        let generation = self.state.tracker.gradient_generation();
+        if generation == self.published_generation {
+            return Ok(());
+        }
+        let Some(gradient) = self.state.tracker.gradient() else {
+            return Ok(());
+        };
+        self.grids_seq += 1;
+        publish_grids(&self.grids, gradient, self.grids_seq)?;
+        let _ = self.grids_wake.notify();
+        self.state.grids_seq = self.grids_seq;
+        self.published_generation = generation;
+        println!(
+            "agp-estimator: learned a push online ({} since the gradient was given): grids seq {} published",
+            self.state.tracker.pushes_learned(),
+            self.grids_seq
+        );
         Ok(())
     }
 
@@ -453,6 +473,40 @@ impl Estimator {
         self.save_failed = saved.err();
         Ok(())
     }
+}
+
+/// Writes every grid of `gradient` as set `seq`, each straight into its loaned sample.
+fn publish_grids(
+    grids: &Publisher<AgpIpc, GradientGrid, ()>,
+    gradient: &AffordanceGradient,
+    seq: u64,
+) -> Result<()> {
+    let alphas = gradient.alphas_deg().count();
+    if alphas > MAX_GRID_ALPHAS {
+        bail!(
+            "the gradient has {alphas} alphas; the grids topic holds a set of at most {MAX_GRID_ALPHAS}"
+        );
+    }
+    for alpha in gradient.alphas_deg() {
+        for kind in GridKind::ALL {
+            let sample = grids
+                .loan_uninit()
+                .map_err(|e| anyhow!("cannot loan a grid sample: {e:?}"))?;
+            // SAFETY: the sample is shared memory mapped from a file: its bytes are
+            // always initialised (zeros, or an older sample's), and every bit pattern
+            // is a valid `GradientGrid` (integers and floats only, no padding), so
+            // taking it as initialised reads nothing undefined. `write_component`
+            // then overwrites the header and every cell.
+            let mut sample = unsafe { sample.assume_init() };
+            gradient
+                .write_component(alpha, kind, seq, sample.payload_mut())
+                .map_err(|e| anyhow!("cannot write a grid: {e}"))?;
+            sample
+                .send()
+                .map_err(|e| anyhow!("cannot send a grid: {e:?}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// Fails when learning could not end by saving the AG file at `path`: a directory (or

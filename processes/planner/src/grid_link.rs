@@ -149,10 +149,6 @@ impl GridLink {
     /// Whether a complete set arrived since the last [`GridLink::wait_gradient`] (the
     /// estimator published its gradients again): the next call returns it at once. Never
     /// blocks.
-    #[allow(
-        dead_code,
-        reason = "for a planner that follows republished gradients; none does yet"
-    )]
     pub fn newer_available(&mut self) -> Result<bool> {
         drain(&self.subscriber, &mut self.set)?;
         Ok(self.set.is_complete())

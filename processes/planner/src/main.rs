@@ -82,6 +82,10 @@ struct Args {
     /// Place: the goal, `X_MM,Y_MM,THETA_DEG` in the world frame (default: the scenario's).
     #[arg(long, value_parser = parse_goal, allow_hyphen_values = true)]
     goal: Option<Pose2>,
+    /// Trajectory: the path, `X_MM,Y_MM` points in the world frame (default: the
+    /// scenario's). `agp bench trajectory` hands each episode its path this way.
+    #[arg(long, num_args = 2.., value_parser = parse_point, allow_hyphen_values = true)]
+    path: Vec<[f64; 2]>,
     /// Place, trajectory: run the learning phase first when the AG file
     /// `<results>/<object>.ag` is missing (run the estimator with `--reuse`, which then
     /// learns; it publishes the saved gradients when the file is there).
@@ -183,6 +187,19 @@ impl SwapIn {
 const TIMEOUT: Duration = Duration::from_secs(30);
 
 /// `X_MM,Y_MM,THETA_DEG` as a world-frame pose in metres and radians.
+/// `X_MM,Y_MM` in metres.
+fn parse_point(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}; expected X_MM,Y_MM"))?;
+    match v[..] {
+        [x, y] if x.is_finite() && y.is_finite() => Ok([x * 1e-3, y * 1e-3]),
+        _ => Err(format!("`{s}`: expected two finite numbers X_MM,Y_MM")),
+    }
+}
+
 fn parse_goal(s: &str) -> Result<Pose2, String> {
     let v: Vec<f64> = s
         .split(',')
@@ -276,7 +293,18 @@ fn run() -> Result<()> {
             };
             let settings = task_mode::TaskSettings {
                 planner: args.planner,
-                task: task_mode::task_of(&scenario, kind, args.goal),
+                task: match task_mode::task_of(&scenario, kind, args.goal) {
+                    agp_planning::Task::Trajectory { .. } if !args.path.is_empty() => {
+                        agp_planning::Task::Trajectory {
+                            path: args
+                                .path
+                                .iter()
+                                .map(|p| glam::DVec2::from_array(*p))
+                                .collect(),
+                        }
+                    }
+                    task => task,
+                },
                 epoch: args.epoch,
                 realtime: args.clock == "realtime",
                 timeout: TIMEOUT,

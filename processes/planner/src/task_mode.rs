@@ -65,6 +65,14 @@ struct PipelineWorld {
     /// This planner's epoch: its events supersede those of an older planner still running
     /// during a swap.
     epoch: u64,
+    /// The estimator's grids, for the gradients it publishes again as it learns on
+    /// (online learning); `None` for a planner that needs no gradient.
+    grids: Option<GridLink>,
+    /// The grids seq of the gradient the episode plans on.
+    served_seq: u64,
+    /// The object's name and where its AG file is (for the grid link's messages).
+    object: String,
+    ag_file: std::path::PathBuf,
 }
 
 impl World for PipelineWorld {
@@ -117,6 +125,36 @@ impl World for PipelineWorld {
 
     fn object_truth(&self) -> Option<Pose> {
         self.oracle.then(|| self.ring.driver.truth().object)
+    }
+
+    /// A newer set of grids than the one the episode plans on: the estimator learned on
+    /// (its estimates carry the newer seq) and the whole set is in. Between two pushes;
+    /// the rebuild allocates, the frames do not.
+    fn newer_gradient(&mut self) -> Option<AffordanceGradient> {
+        let seq = self.ring.estimate().grids_seq;
+        let link = self.grids.as_mut()?;
+        if seq <= self.served_seq {
+            return None;
+        }
+        match link.newer_available() {
+            Ok(true) => {}
+            Ok(false) => return None,
+            Err(e) => {
+                eprintln!("planner: the estimator's newer grids: {e:#}");
+                return None;
+            }
+        }
+        match link.wait_gradient(&self.object, Duration::from_secs(1), &self.ag_file) {
+            Ok(g) => {
+                self.served_seq = seq;
+                println!("planner: planning on the estimator's grids seq {seq} (learned online)");
+                Some(g)
+            }
+            Err(e) => {
+                eprintln!("planner: the estimator's newer grids: {e:#}");
+                None
+            }
+        }
     }
 }
 
@@ -177,8 +215,10 @@ impl Session {
             );
         }
         let robot = RobotDescription::epuck();
+        let mut grids = None;
         let gradient = if settings.planner.needs_gradient() {
-            let mut link = GridLink::open(instance).context("cannot open the gradient grids")?;
+            let link =
+                grids.insert(GridLink::open(instance).context("cannot open the gradient grids")?);
             match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
                 Ok(g) => Some(g),
                 Err(e) if agp_runtime::shutdown_requested() => {
@@ -229,11 +269,16 @@ impl Session {
             }
             Err(e) => return Err(e),
         };
+        let served_seq = ring.estimate().grids_seq;
         let mut world = PipelineWorld {
             ring,
             oracle: settings.planner.reads_ground_truth(),
             swap_in,
             epoch: settings.epoch,
+            grids,
+            served_seq,
+            object: scenario.name.clone(),
+            ag_file: settings.ag_file.clone(),
         };
         if world.swap_in.is_some() {
             // A swapped-in planner answers the first frame of its epoch at once, wheels

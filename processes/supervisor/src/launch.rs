@@ -20,6 +20,24 @@
 //! stop_grace_ms = 3000          # SIGTERM -> SIGKILL delay when stopping; default 3000
 //! ```
 //!
+//! A process that runs under another supervisor (on another computer, or another instance
+//! of this one) is named with `remote` instead of `exec`: `agp up` runs `agp bridge` in its
+//! place, which forwards this instance's topics to the far end over Zenoh and back, with the
+//! slot's epoch and token; the far supervisor runs the process itself.
+//!
+//! ```toml
+//! [[process]]
+//! name = "planner"              # the planner runs under another supervisor
+//! remote = { role = "planner", listen = "tcp/127.0.0.1:7447" }
+//! ends_run = true               # the far end stopping ends this run too
+//! ```
+//!
+//! `role` is what the remote process is: `planner` (this instance runs physics and the
+//! estimator: the bridge's robot side) or `robot` (the far instance runs them: the bridge's
+//! planner side). One of `listen` and `connect` (`tcp/HOST:PORT`); optional `topics` (the
+//! topics carried, default all) and `link` (the Zenoh key prefix both ends share, default
+//! `agp`).
+//!
 //! `view = true` (top level) also runs `agp view` on the instance, a Foxglove WebSocket
 //! server on port 8765 (`view = PORT` for another port, 0 for any free one), as a process
 //! named `view` after the others.
@@ -369,6 +387,10 @@ pub enum LaunchFaultKind {
         exec: String,
         looked_at: PathBuf,
     },
+    /// A `remote` process is ill-formed: its role, endpoint, topics or link, or it also
+    /// names `exec` or `args`, or a process names neither `exec` nor `remote`.
+    #[error("process `{process}`: {reason}")]
+    BadRemote { process: String, reason: String },
     /// An agp process refused its arguments with the launch file's clock (its own
     /// `--check`).
     #[error("process `{process}`: {reason}")]
@@ -417,7 +439,8 @@ struct RawClock {
 #[serde(deny_unknown_fields)]
 struct RawProcess {
     name: Spanned<String>,
-    exec: Spanned<String>,
+    exec: Option<Spanned<String>>,
+    remote: Option<Spanned<RawRemote>>,
     args: Option<Spanned<Vec<String>>>,
     #[serde(default)]
     env: BTreeMap<Spanned<String>, String>,
@@ -425,6 +448,18 @@ struct RawProcess {
     #[serde(default)]
     ends_run: bool,
     stop_grace_ms: Option<Spanned<u64>>,
+}
+
+/// `remote = { role = "planner" | "robot", listen | connect = "tcp/HOST:PORT", topics = [..],
+/// link = ".." }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRemote {
+    role: String,
+    listen: Option<String>,
+    connect: Option<String>,
+    topics: Option<Vec<String>>,
+    link: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -837,23 +872,74 @@ fn resolve_process(
     exe_dir: &Path,
 ) -> ProcessConfig {
     let name = p.name.as_ref().clone();
-    let exec_str = p.exec.as_ref();
-    // A bare name is a binary of the workspace, next to `agp`; anything with a slash is a path.
-    let exec = if exec_str.contains('/') {
-        base.join(exec_str)
-    } else {
-        exe_dir.join(exec_str)
+    let (exec, remote_args) = match (&p.exec, &p.remote) {
+        (Some(raw_exec), None) => {
+            let exec_str = raw_exec.as_ref();
+            // A bare name is a binary of the workspace, next to `agp`; anything with a slash
+            // is a path.
+            let exec = if exec_str.contains('/') {
+                base.join(exec_str)
+            } else {
+                exe_dir.join(exec_str)
+            };
+            if exec_str.is_empty() || !is_executable_file(&exec) {
+                check.fault_at(
+                    raw_exec,
+                    LaunchFaultKind::MissingExecutable {
+                        process: name.clone(),
+                        exec: exec_str.clone(),
+                        looked_at: exec.clone(),
+                    },
+                );
+            }
+            (exec, None)
+        }
+        (None, Some(remote)) => {
+            let exec = exe_dir.join("agp");
+            if !is_executable_file(&exec) {
+                check.fault_at(
+                    remote,
+                    LaunchFaultKind::MissingExecutable {
+                        process: name.clone(),
+                        exec: "agp".to_owned(),
+                        looked_at: exec.clone(),
+                    },
+                );
+            }
+            if let Some(args) = &p.args {
+                check.fault_at(
+                    args,
+                    LaunchFaultKind::BadRemote {
+                        process: name.clone(),
+                        reason: "a `remote` process runs `agp bridge` in its place: no `args`"
+                            .to_owned(),
+                    },
+                );
+            }
+            (exec, Some(remote_bridge_args(check, &name, remote)))
+        }
+        (Some(raw_exec), Some(_)) => {
+            check.fault_at(
+                raw_exec,
+                LaunchFaultKind::BadRemote {
+                    process: name.clone(),
+                    reason: "a `remote` process runs under another supervisor: no `exec`"
+                        .to_owned(),
+                },
+            );
+            (PathBuf::new(), None)
+        }
+        (None, None) => {
+            check.fault_at(
+                &p.name,
+                LaunchFaultKind::BadRemote {
+                    process: name.clone(),
+                    reason: "no `exec`: name an executable, or `remote = { ... }` for a process that runs under another supervisor".to_owned(),
+                },
+            );
+            (PathBuf::new(), None)
+        }
     };
-    if exec_str.is_empty() || !is_executable_file(&exec) {
-        check.fault_at(
-            &p.exec,
-            LaunchFaultKind::MissingExecutable {
-                process: name.clone(),
-                exec: exec_str.clone(),
-                looked_at: exec.clone(),
-            },
-        );
-    }
 
     let mut env = BTreeMap::new();
     for (key, value) in &p.env {
@@ -955,7 +1041,7 @@ fn resolve_process(
         line: check.line_of(&p.name.span()),
         name,
         exec,
-        args: args.to_vec(),
+        args: remote_args.unwrap_or_else(|| args.to_vec()),
         env,
         restart,
         ends_run: p.ends_run,
@@ -964,6 +1050,79 @@ fn resolve_process(
             .as_ref()
             .map_or(DEFAULT_STOP_GRACE, |ms| Duration::from_millis(*ms.as_ref())),
     }
+}
+
+/// The arguments of the `agp bridge` a `remote` process runs as (`--instance` comes from its
+/// context variables, the epoch and token from the slot), once its keys are checked.
+fn remote_bridge_args(
+    check: &mut Checker<'_>,
+    process: &str,
+    raw: &Spanned<RawRemote>,
+) -> Vec<String> {
+    let r = raw.as_ref();
+    let mut faults = Vec::new();
+    let side = match r.role.as_str() {
+        "planner" => agp_bridge::Side::Robot,
+        "robot" => agp_bridge::Side::Planner,
+        other => {
+            faults.push(format!(
+                "unknown remote role `{other}`; expected `planner` (the far end runs the planner) or `robot` (it runs physics and the estimator)"
+            ));
+            agp_bridge::Side::Robot
+        }
+    };
+    let (flag, endpoint) = match (&r.listen, &r.connect) {
+        (Some(l), None) => ("--listen", l.clone()),
+        (None, Some(c)) => ("--connect", c.clone()),
+        _ => {
+            faults
+                .push("`remote` needs one of `listen` and `connect` (`tcp/HOST:PORT`)".to_owned());
+            ("--listen", String::new())
+        }
+    };
+    if !endpoint.is_empty()
+        && let Err(e) = agp_bridge::Endpoint::check(&endpoint)
+    {
+        faults.push(e.to_string());
+    }
+    let topics = r
+        .topics
+        .as_ref()
+        .map_or_else(|| "all".to_owned(), |t| t.join(","));
+    if let Err(e) = agp_bridge::parse_topics(&topics) {
+        faults.push(format!("`remote.topics`: {e}"));
+    }
+    let link = r.link.clone().unwrap_or_else(|| "agp".to_owned());
+    if link.is_empty()
+        || link.len() > 64
+        || !link
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        faults.push(format!(
+            "bad `remote.link` `{link}`: 1 to 64 letters, digits, `-` and `_`"
+        ));
+    }
+    for reason in faults {
+        check.fault_at(
+            raw,
+            LaunchFaultKind::BadRemote {
+                process: process.to_owned(),
+                reason,
+            },
+        );
+    }
+    vec![
+        "bridge".to_owned(),
+        "--side".to_owned(),
+        side.name().to_owned(),
+        flag.to_owned(),
+        endpoint,
+        "--topics".to_owned(),
+        topics,
+        "--link".to_owned(),
+        link,
+    ]
 }
 
 /// The name of the process `record = "FILE"` adds.
@@ -1606,6 +1765,119 @@ stop_grace_ms = 500
         assert_eq!(line, Some(1));
         assert!(
             shown.ends_with("`view` must be true, false or a port from 0 to 65535, got 70000"),
+            "{shown}"
+        );
+    }
+
+    /// A file whose planner is remote: physics here, the planner reached through the bridge.
+    const REMOTE: &str = "instance = \"lab\"\nscenario = \"triangle\"\n\
+        [[process]]\nname = \"physics\"\nexec = \"agp-fake\"\n\
+        [[process]]\nname = \"planner\"\n\
+        remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\" }\nends_run = true\n";
+
+    fn with_agp(f: &Fixture) {
+        let path = f.dir.path().join("bin/agp");
+        std::fs::write(&path, "#!/bin/sh\n").expect("write");
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    }
+
+    #[test]
+    fn a_remote_planner_runs_agp_bridge_on_the_robot_side_in_its_place() {
+        let f = Fixture::new();
+        with_agp(&f);
+        let config = f.parse(REMOTE).expect("a valid file");
+        let planner = &config.processes[1];
+        assert_eq!(planner.name, "planner");
+        assert_eq!(planner.exec, f.dir.path().join("bin/agp"));
+        assert!(planner.ends_run);
+        let expected = [
+            "bridge",
+            "--side",
+            "robot",
+            "--listen",
+            "tcp/127.0.0.1:7447",
+            "--topics",
+            "all",
+            "--link",
+            "agp",
+        ];
+        assert_eq!(planner.args, expected);
+        let text = REMOTE.replace(
+            "role = \"planner\", listen = \"tcp/127.0.0.1:7447\"",
+            "role = \"robot\", connect = \"tcp/127.0.0.1:7447\", topics = [\"ir_frames\", \"motor_commands\"], link = \"lab2\"",
+        );
+        let config = f.parse(&text).expect("a valid file");
+        let expected = [
+            "bridge",
+            "--side",
+            "planner",
+            "--connect",
+            "tcp/127.0.0.1:7447",
+            "--topics",
+            "ir_frames,motor_commands",
+            "--link",
+            "lab2",
+        ];
+        assert_eq!(config.processes[1].args, expected);
+    }
+
+    #[test]
+    fn a_remote_process_with_a_bad_role_endpoint_topic_or_an_exec_is_refused_on_its_line() {
+        let f = Fixture::new();
+        with_agp(&f);
+        let cases = [
+            (
+                "role = \"planner\"",
+                "role = \"camera\"",
+                "unknown remote role `camera`",
+            ),
+            (
+                "listen = \"tcp/127.0.0.1:7447\"",
+                "listen = \"udp/127.0.0.1:7447\"",
+                "is not a TCP endpoint",
+            ),
+            (
+                "listen = \"tcp/127.0.0.1:7447\"",
+                "listen = \"tcp/127.0.0.1:0\"",
+                "has no port",
+            ),
+            (
+                "listen = \"tcp/127.0.0.1:7447\"",
+                "listen = \"tcp/127.0.0.1:7447\", connect = \"tcp/127.0.0.1:7448\"",
+                "needs one of `listen` and `connect`",
+            ),
+            (
+                " }\nends_run",
+                ", topics = [\"ground_truth\"] }\nends_run",
+                "unknown topic `ground_truth`",
+            ),
+            (
+                " }\nends_run",
+                ", link = \"a/b\" }\nends_run",
+                "bad `remote.link` `a/b`",
+            ),
+        ];
+        for (from, to, says) in cases {
+            let (line, shown, kind) = f.fault(&REMOTE.replace(from, to));
+            assert_eq!(line, Some(8), "{shown}");
+            assert!(matches!(kind, LaunchFaultKind::BadRemote { .. }), "{shown}");
+            assert!(shown.contains(says), "{shown}");
+        }
+        let (line, shown, _) =
+            f.fault(&REMOTE.replace("remote =", "exec = \"agp-fake\"\nremote ="));
+        assert_eq!(line, Some(8), "{shown}");
+        assert!(shown.contains("no `exec`"), "{shown}");
+        let (line, shown, _) = f.fault(&REMOTE.replace("remote = ", "args = [\"x\"]\nremote = "));
+        assert_eq!(line, Some(8), "{shown}");
+        assert!(shown.contains("no `args`"), "{shown}");
+        let text = REMOTE.replace(
+            "remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\" }\n",
+            "",
+        );
+        let (line, shown, _) = f.fault(&text);
+        assert_eq!(line, Some(7), "{shown}");
+        assert!(
+            shown.contains("no `exec`: name an executable, or `remote"),
             "{shown}"
         );
     }

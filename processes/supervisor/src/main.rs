@@ -1,7 +1,10 @@
 //! `agp`: the supervisor CLI. `agp up` runs a launch file; `agp probe push` measures one push.
 
-use agp_harness::{bench_learn, bench_paper, bench_tasks, bench_trajectory, probe};
+use agp_harness::{
+    bench_adapt, bench_learn, bench_merge, bench_paper, bench_tasks, bench_trajectory, probe,
+};
 
+mod bridge;
 mod control;
 mod control_plane;
 mod goals;
@@ -100,6 +103,16 @@ enum Cmd {
     ///
     /// Example: agp replay run.mcap --json replay.json
     Replay(replay::ReplayArgs),
+    /// Forward chosen topics of a running instance to a Zenoh session and back, so the
+    /// planner of one instance drives the physics and estimator of another that shares no
+    /// memory with it (another computer, or another instance on this one). One end listens,
+    /// the other connects; nothing is scouted. A launch file's `remote = { ... }` process
+    /// runs it with the run.
+    ///
+    /// Example: agp bridge --instance lab --side robot --listen tcp/127.0.0.1:7447
+    ///
+    /// Example: agp bridge --instance desk --side planner --connect tcp/127.0.0.1:7447
+    Bridge(bridge::BridgeArgs),
     #[command(name = "replay-driver", hide = true)]
     ReplayDriver(replay::DriverArgs),
     #[command(name = "profile-floor-pong", hide = true)]
@@ -208,11 +221,13 @@ enum BenchCmd {
     ///
     /// Example: agp bench place --scenario lshape --episodes 20 --json place.json --plot place.svg
     Place(bench_tasks::BenchPlaceArgs),
-    /// Push the object along a line (benchmarks.md section 2): the affordance and the
-    /// baseline planner on the same seed, the mean distance of the recorded centroid
-    /// positions to the path, and their ratio beside the paper's 7.82 / 10.71.
+    /// Push the object along paths (benchmarks.md section 2): a straight line, bends of 45
+    /// and 90 deg, an S-curve and a circle arc, each from the object's start; the
+    /// affordance and the baseline planner on each path over the seeds, the same seed for
+    /// both; the mean distance of the recorded centroid positions to the path, per path
+    /// and overall, and the ratio beside the paper's 7.82 / 10.71 (one straight line).
     ///
-    /// Example: agp bench trajectory --scenario lshape --json trajectory.json --plot trajectory.svg
+    /// Example: agp bench trajectory --scenario lshape --paths straight,bend90 --json trajectory.json --plot trajectory.svg
     Trajectory(bench_trajectory::BenchTrajectoryArgs),
     /// All three benchmarks on the paper's objects (learning: triangle, square, lshape,
     /// circle; trajectory: lshape; placement: triangle and lshape with every planner), then
@@ -221,6 +236,19 @@ enum BenchCmd {
     ///
     /// Example: agp bench paper --json paper.json
     Paper(bench_paper::BenchPaperArgs),
+    /// Merge the partial JSONs of a run split with `--shard I/N` (each of one benchmark and
+    /// one run: same scenario, same seed list, every seed once) into the JSON one run over
+    /// every seed writes; only `wall_time_s` differs (the longest part's).
+    ///
+    /// Example: agp bench merge part-1.json part-2.json --json place.json --plot seeds.svg
+    Merge(bench_merge::BenchMergeArgs),
+    /// An AG that keeps learning: learned at the scenario's floor friction, it places the
+    /// object at a few goals, then the floor's friction (default 0.25) and/or the object's
+    /// mass change and it places it at 20 more, frozen and learning on from every push;
+    /// prediction error per push against ground truth, success and recovery per run.
+    ///
+    /// Example: agp bench adapt --scenario triangle --friction 0.25 --json adapt.json
+    Adapt(bench_adapt::BenchAdaptArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -260,6 +288,7 @@ fn main() -> ExitCode {
         Cmd::Profile(args) => profile::run(args),
         Cmd::Record(args) => record::run(args),
         Cmd::Replay(args) => replay::run(args),
+        Cmd::Bridge(args) => bridge::run(args),
         Cmd::ReplayDriver(args) => replay::drive(args),
         Cmd::View(args) => view::run(args),
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
@@ -275,6 +304,12 @@ fn main() -> ExitCode {
         Cmd::Bench {
             what: BenchCmd::Paper(args),
         } => bench_paper::run(args).map(|_| 0),
+        Cmd::Bench {
+            what: BenchCmd::Merge(args),
+        } => bench_merge::run(args).map(|_| 0),
+        Cmd::Bench {
+            what: BenchCmd::Adapt(args),
+        } => bench_adapt::run(args).map(|_| 0),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {

@@ -660,10 +660,16 @@ pub(crate) fn spawn_process(
         .envs(config.context_env(process))
         .env("AGP_EPOCH", epoch.to_string())
         .stdin(Stdio::null());
-    // The run's secret goes to physics alone; every other child gets its epoch's token, so
-    // physics applies commands of the processes this supervisor started only.
+    // The run's secret goes to physics alone, and to the planner side of a bridge, which
+    // forwards only commands that carry this run's tokens; every other child gets its
+    // epoch's token, so physics applies commands of the processes this supervisor started
+    // only.
     let key = run_session_key()?;
-    if exec.file_name().is_some_and(|n| n == "agp-physics") {
+    let planner_side_bridge = exec.file_name().is_some_and(|n| n == "agp")
+        && args
+            .windows(2)
+            .any(|w| w[0] == "--side" && w[1] == "planner");
+    if exec.file_name().is_some_and(|n| n == "agp-physics") || planner_side_bridge {
         cmd.env(agp_shared_types::SESSION_KEY_ENV, key.to_hex())
             .env_remove(agp_shared_types::SESSION_TOKEN_ENV);
     } else {

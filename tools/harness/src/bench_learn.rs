@@ -21,6 +21,11 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Map, Value, json};
 
+use crate::seeds::{
+    SeedArgs, SeedParts, Shard, Spread, add_seed_fields, finite_or_null, gather, longest_wall_time,
+    number_at, seed_list, spread_at,
+};
+
 /// Alphas of the paper's protocol, degrees.
 const PAPER_ALPHAS_DEG: [f64; 3] = [0.0, 15.0, -15.0];
 /// Trials per alpha in the paper's protocol (one every 6 deg).
@@ -35,9 +40,10 @@ pub struct BenchLearnArgs {
     /// files; repeat the flag or separate with commas [default: the four built-ins]
     #[arg(long = "scenario", value_name = "NAME|FILE", value_delimiter = ',')]
     pub scenarios: Vec<String>,
-    /// Seed of the simulator's noise and of the unseen pushes.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    /// Seeds of the simulator's noise and of the unseen pushes: each seed learns every
+    /// object anew. With several seeds each seed's files go to `<out>/seed-<S>/`.
+    #[command(flatten)]
+    pub seeds: SeedArgs,
     /// Alphas of the trials, degrees: the angle between the robot's heading and the line to
     /// the object's centroid. The benchmark's are 0, 15 and -15; others are said in the
     /// output.
@@ -65,7 +71,9 @@ pub struct BenchLearnArgs {
     /// the tables go to standard error).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Folder for the learned AG files (`<object>.ag`) and their plots (`<object>.svg`).
+    /// Folder for the learned AG files (`<object>.ag`) and their plots (`<object>.svg`);
+    /// with several seeds, `seed-<S>/` in it for each seed, and the first seed's AG files
+    /// in it too (what `agp bench place` and `trajectory` load by default).
     #[arg(long, value_name = "DIR", default_value = DEFAULT_OUT)]
     pub out: PathBuf,
 }
@@ -78,7 +86,7 @@ impl BenchLearnArgs {
     pub fn for_scenarios(scenarios: &[&str], out: PathBuf) -> Self {
         Self {
             scenarios: scenarios.iter().map(|s| (*s).to_owned()).collect(),
-            seed: 7,
+            seeds: SeedArgs::one(7),
             alphas: PAPER_ALPHAS_DEG.to_vec(),
             eval: MIN_EVAL_PUSHES,
             trials: PAPER_TRIALS_PER_ALPHA,
@@ -86,6 +94,16 @@ impl BenchLearnArgs {
             json: None,
             out,
         }
+    }
+}
+
+/// The folder of `seed`'s files: `out` itself when the run has one seed, else
+/// `out/seed-<S>`.
+pub fn seed_dir(out: &Path, seed: u64, seeds_in_run: usize) -> PathBuf {
+    if seeds_in_run > 1 {
+        out.join(format!("seed-{seed}"))
+    } else {
+        out.to_owned()
     }
 }
 
@@ -127,10 +145,14 @@ pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
     learn(args).map(|_| ExitCode::SUCCESS)
 }
 
-/// Runs the learning benchmark; its JSON document (written to `--json` if given).
+/// Runs the learning benchmark over every seed of this run (its shard's share with
+/// `--shard`), every (seed, object) side by side on the cores; each seed's document merged
+/// by [`merge`] into the run's (written to `--json` if given).
 pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     let wall = Instant::now();
-    let cfg = config(args)?;
+    let all_seeds = args.seeds.all();
+    let seeds = args.seeds.mine();
+    let cfg = config(args, seeds[0])?;
     let jobs = resolve_jobs(&args.scenarios)?;
     for job in &jobs {
         check_object(&job.scenario, &cfg).with_context(|| {
@@ -153,8 +175,13 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         "agp bench learn: physics in-process (the rapier2d simulator linked into `agp` as a library, not the `agp-physics` process over shared memory)",
     );
     human.say(&format!(
-        "seed {}, alphas {} deg, {} trials per alpha, {} unseen pushes, push {} s at {:.0} mm/s",
-        cfg.seed,
+        "{} {}{}, alphas {} deg, {} trials per alpha, {} unseen pushes, push {} s at {:.0} mm/s",
+        if seeds.len() == 1 { "seed" } else { "seeds" },
+        seed_list(&seeds),
+        args.seeds
+            .shard
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
+            .unwrap_or_default(),
         alphas_text(&cfg.alphas_deg),
         cfg.trials_per_alpha,
         cfg.eval_pushes,
@@ -168,41 +195,102 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         ));
     }
 
-    let total: usize = jobs.len() * cfg.progress_total();
+    let work: Vec<(LearnBenchConfig, &Job)> = seeds
+        .iter()
+        .map(|&seed| config(args, seed))
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .flat_map(|cfg| jobs.iter().map(move |job| (cfg.clone(), job)))
+        .collect();
+    let total: usize = work.len() * cfg.progress_total();
     let bar = progress_bar(total as u64);
     bar.set_prefix("learning");
-    // The objects are independent (each its own simulator, seeded alike): they learn side
-    // by side on the machine's cores, and are reported in the order given.
-    let learned = learn_objects(&jobs, &cfg, &bar);
-    let mut objects = Map::new();
-    let mut missed = Vec::new();
-    for (job, outcome) in jobs.iter().zip(learned) {
-        let (report, wall_s) =
-            outcome.with_context(|| format!("cannot learn `{}`", job.scenario.name))?;
-        let (ag_path, plot_path) = write_files(args, job, &cfg, &report)?;
-        bar.suspend(|| {
-            human.say(&format!(
-                "{}  AG file  {}\n  plot     {}",
-                table(job, &report, wall_s),
-                ag_path.display(),
-                plot_path.display()
-            ));
-        });
-        missed.extend(
-            report
-                .targets()
-                .into_iter()
-                .filter(|t| !t.met)
-                .map(|t| format!("{}: {} ({})", job.scenario.name, t.what, t.measured)),
-        );
-        objects.insert(
-            job.scenario.name.clone(),
-            object_json(job, &report, wall_s, &ag_path, &plot_path),
-        );
+    // The objects and seeds are independent (each its own simulator): they learn side by
+    // side on the machine's cores, and are reported in the order given.
+    let learned = learn_objects(&work, &bar);
+    let mut docs = Vec::with_capacity(seeds.len());
+    let mut learned = learned.into_iter();
+    for &seed in &seeds {
+        let cfg = config(args, seed)?;
+        let out = seed_dir(&args.out, seed, all_seeds.len());
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("--out: cannot create the folder {}", out.display()))?;
+        let mut objects = Map::new();
+        let mut missed = Vec::new();
+        for job in &jobs {
+            let outcome = learned.next().context("an object without its outcome")?;
+            let (report, wall_s) =
+                outcome.with_context(|| format!("cannot learn `{}`", job.scenario.name))?;
+            let (ag_path, plot_path) = write_files(&out, job, &cfg, &report)?;
+            if all_seeds.len() > 1 && seed == all_seeds[0] {
+                // The run's first seed's gradient is also where `agp bench place` looks by
+                // default (its shard alone writes it).
+                let default = self::ag_path(&args.out, &job.scenario);
+                std::fs::copy(&ag_path, &default).with_context(|| {
+                    format!("cannot copy {} to {}", ag_path.display(), default.display())
+                })?;
+            }
+            if seeds.len() == 1 {
+                bar.suspend(|| {
+                    human.say(&format!(
+                        "{}  AG file  {}\n  plot     {}",
+                        table(job, &report, wall_s),
+                        ag_path.display(),
+                        plot_path.display()
+                    ));
+                });
+            }
+            missed.extend(
+                report
+                    .targets()
+                    .into_iter()
+                    .filter(|t| !t.met)
+                    .map(|t| format!("{}: {} ({})", job.scenario.name, t.what, t.measured)),
+            );
+            objects.insert(
+                job.scenario.name.clone(),
+                object_json(job, &report, wall_s, &ag_path, &plot_path),
+            );
+        }
+        let wall_s = objects
+            .values()
+            .map(|o| number_at(o, &["wall_time_s"]))
+            .fold(0.0, f64::max);
+        docs.push(json!({
+            "benchmark": "learn",
+            "seed": seed,
+            "physics": "in-process",
+            "protocol_as_specified": as_specified,
+            "alphas_deg": cfg.alphas_deg,
+            "trials_per_alpha": cfg.trials_per_alpha,
+            "eval_pushes": cfg.eval_pushes,
+            "push_duration_s": cfg.push.push_duration,
+            "objects": objects,
+            "targets_missed": missed,
+            "wall_time_s": wall_s,
+        }));
     }
     bar.finish_and_clear();
 
+    let parts = gather(&docs, "learn", learn_signature).map_err(anyhow::Error::new)?;
+    let parts = SeedParts {
+        seeds: all_seeds,
+        ..parts
+    };
+    let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
+    doc["wall_time_s"] = json!(wall_time_s);
+    if seeds.len() > 1 {
+        human.say(&summary_table(&doc));
+        human.say(&format!(
+            "AG files and plots in {}/seed-<S>/",
+            args.out.display()
+        ));
+    }
+    let missed: Vec<&str> = doc["targets_missed"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_str).collect())
+        .unwrap_or_default();
     human.say("");
     if missed.is_empty() {
         human.say("every target met");
@@ -213,19 +301,6 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         }
     }
     human.say(&format!("wall time {wall_time_s:.1} s"));
-    let doc = json!({
-            "benchmark": "learn",
-            "seed": cfg.seed,
-            "physics": "in-process",
-            "protocol_as_specified": as_specified,
-            "alphas_deg": cfg.alphas_deg,
-            "trials_per_alpha": cfg.trials_per_alpha,
-            "eval_pushes": cfg.eval_pushes,
-            "push_duration_s": cfg.push.push_duration,
-            "objects": objects,
-            "targets_missed": missed,
-            "wall_time_s": wall_time_s,
-    });
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&doc).context("cannot encode the JSON")?;
         if json_to_stdout {
@@ -241,14 +316,203 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     Ok(doc)
 }
 
-/// Learns every job's object, side by side on the machine's cores; each object's report
-/// with its own wall time (seconds), in the order of `jobs`.
+/// What must be alike in every seed of one learning run.
+fn learn_signature(doc: &Value) -> Value {
+    let objects: Vec<&String> = doc["objects"]
+        .as_object()
+        .map(|m| m.keys().collect())
+        .unwrap_or_default();
+    json!({
+        "physics": doc["physics"],
+        "alphas_deg": doc["alphas_deg"],
+        "trials_per_alpha": doc["trials_per_alpha"],
+        "eval_pushes": doc["eval_pushes"],
+        "push_duration_s": doc["push_duration_s"],
+        "objects": objects,
+    })
+}
+
+/// Figures of an object that are one number per seed: aggregated as their mean over the
+/// seeds, with their spread beside.
+const LEARN_MEAN_FIGURES: [[&str; 2]; 5] = [
+    ["prediction", "median_displacement_error_mm"],
+    ["prediction", "median_displacement_error_ratio"],
+    ["prediction", "median_rotation_error_deg"],
+    ["pose", "median_position_error_mm"],
+    ["pose", "median_orientation_error_deg"],
+];
+
+/// Counts of an object, summed over the seeds.
+const LEARN_SUMMED: [&[&str]; 5] = [
+    &["prediction", "pushes"],
+    &["prediction", "unpredicted"],
+    &["pose", "circlings"],
+    &["trials"],
+    &["trials_learned"],
+];
+
+fn set_at(doc: &mut Value, path: &[&str], v: Value) {
+    let mut at = doc;
+    for k in &path[..path.len() - 1] {
+        if !at.get(*k).is_some_and(Value::is_object) {
+            at[*k] = json!({});
+        }
+        at = &mut at[*k];
+    }
+    at[path[path.len() - 1]] = v;
+}
+
+/// The learning document of `parts`: per object, each per-seed figure's mean over the
+/// seeds (the largest rotation per alpha, the prediction's and the pose's medians) with its
+/// spread, counts summed, every seed's files; targets missed, each with its seed when the
+/// run has several. `wall_time_s` is the longest seed's; the caller sets the run's own.
+fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let first = docs[0];
+    let many = parts.seeds.len() > 1;
+    let mut objects = Map::new();
+    if let Some(names) = first["objects"].as_object() {
+        for (name, o) in names {
+            let per: Vec<&Value> = docs.iter().map(|d| &d["objects"][name]).collect();
+            let mut agg = json!({
+                "source": o["source"],
+                "symmetry_order": o["symmetry_order"],
+            });
+            let mut spread = json!({});
+            for key in ["max_rotation_deg", "true_max_rotation_deg"] {
+                if let Some(alphas) = o[key].as_object() {
+                    for alpha in alphas.keys() {
+                        let s = spread_at(per.iter().copied(), &[key, alpha]);
+                        set_at(
+                            &mut agg,
+                            &[key, alpha],
+                            finite_or_null(number_at(&s, &["mean"])),
+                        );
+                        set_at(&mut spread, &[key, alpha], s);
+                    }
+                }
+            }
+            for path in LEARN_MEAN_FIGURES {
+                let s = spread_at(per.iter().copied(), &path);
+                set_at(&mut agg, &path, finite_or_null(number_at(&s, &["mean"])));
+                set_at(&mut spread, &path, s);
+            }
+            for path in LEARN_SUMMED {
+                let sum: u64 = per
+                    .iter()
+                    .filter_map(|p| path.iter().try_fold(*p, |v, k| v.get(*k)))
+                    .filter_map(Value::as_u64)
+                    .sum();
+                set_at(&mut agg, path, json!(sum));
+            }
+            agg["ag_files"] = per.iter().map(|p| p["ag_file"].clone()).collect();
+            agg["plot_files"] = per.iter().map(|p| p["plot_file"].clone()).collect();
+            if let Some(paper) = o.get("paper_max_rotation_deg") {
+                agg["paper_max_rotation_deg"] = paper.clone();
+            }
+            agg["wall_time_s"] = json!(
+                per.iter()
+                    .map(|p| number_at(p, &["wall_time_s"]))
+                    .filter(|v| v.is_finite())
+                    .sum::<f64>()
+            );
+            agg["spread"] = spread;
+            objects.insert(name.clone(), agg);
+        }
+    }
+    let missed: Vec<Value> = docs
+        .iter()
+        .flat_map(|d| {
+            let seed = number_at(d, &["seed"]);
+            d["targets_missed"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .map(move |m| match m.as_str() {
+                    Some(text) if many => json!(format!("seed {seed}: {text}")),
+                    _ => m,
+                })
+        })
+        .collect();
+    let mut doc = Map::new();
+    for key in [
+        "benchmark",
+        "seed",
+        "physics",
+        "protocol_as_specified",
+        "alphas_deg",
+        "trials_per_alpha",
+        "eval_pushes",
+        "push_duration_s",
+    ] {
+        doc.insert(key.into(), first[key].clone());
+    }
+    doc.insert("objects".into(), Value::Object(objects));
+    doc.insert("targets_missed".into(), Value::Array(missed));
+    add_seed_fields(&mut doc, parts, shard);
+    let wall = docs
+        .iter()
+        .map(|d| number_at(d, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    doc.insert("wall_time_s".into(), json!(wall));
+    Value::Object(doc)
+}
+
+/// Merges learning documents of disjoint seed sets (one-seed documents, whole runs or a
+/// run's shards) into the document one run over all their seeds writes, seeds in order;
+/// `wall_time_s` is the longest part's.
+pub fn merge(parts: &[Value]) -> Result<Value> {
+    let gathered = gather(parts, "learn", learn_signature).map_err(anyhow::Error::new)?;
+    let mut doc = assemble(&gathered, None);
+    doc["wall_time_s"] = json!(longest_wall_time(parts));
+    Ok(doc)
+}
+
+/// The human table of a run over several seeds: per object, each figure as mean (min-max)
+/// over the seeds.
+fn summary_table(doc: &Value) -> String {
+    let mut out = String::from("\neach figure: mean (min-max) over the seeds\n");
+    let show = |s: &Value, decimals: usize| -> String {
+        serde_json::from_value::<Spread>(s.clone())
+            .map_or_else(|_| "-".to_owned(), |s| s.show(decimals))
+    };
+    if let Some(objects) = doc["objects"].as_object() {
+        for (name, o) in objects {
+            let sp = &o["spread"];
+            out.push_str(&format!(
+                "== {name} ==\n  largest single-push rotation (learned AG, IR), deg:"
+            ));
+            if let Some(alphas) = sp["max_rotation_deg"].as_object() {
+                for (alpha, s) in alphas {
+                    out.push_str(&format!("  {alpha:>3}: {}", show(s, 2)));
+                }
+            }
+            out.push('\n');
+            out.push_str(&format!(
+                "  unseen pushes: displacement error {} mm ({} of the true), rotation error {} deg\n",
+                show(&sp["prediction"]["median_displacement_error_mm"], 2),
+                show(&sp["prediction"]["median_displacement_error_ratio"], 3),
+                show(&sp["prediction"]["median_rotation_error_deg"], 2)
+            ));
+            out.push_str(&format!(
+                "  pose from one circling: {} mm, {} deg\n",
+                show(&sp["pose"]["median_position_error_mm"], 2),
+                show(&sp["pose"]["median_orientation_error_deg"], 2)
+            ));
+        }
+    }
+    out
+}
+
+/// Learns every (seed, object) of `work`, side by side on the machine's cores; each
+/// object's report with its own wall time (seconds), in the order of `work`.
 fn learn_objects(
-    jobs: &[Job],
-    cfg: &LearnBenchConfig,
+    work: &[(LearnBenchConfig, &Job)],
     bar: &ProgressBar,
 ) -> Vec<Result<(ObjectReport, f64), LearnBenchError>> {
-    side_by_side(jobs, |job| {
+    side_by_side(work, |(cfg, job)| {
         let started = Instant::now();
         let mut shown = 0;
         let report = run_object(&job.scenario, cfg, &mut |p| {
@@ -310,7 +574,7 @@ fn file_stem(name: &str) -> String {
     }
 }
 
-fn config(args: &BenchLearnArgs) -> Result<LearnBenchConfig> {
+fn config(args: &BenchLearnArgs, seed: u64) -> Result<LearnBenchConfig> {
     if args.trials == 0 {
         bail!("--trials must be at least 1");
     }
@@ -336,7 +600,7 @@ fn config(args: &BenchLearnArgs) -> Result<LearnBenchConfig> {
         }
     }
     let mut cfg = LearnBenchConfig {
-        seed: args.seed,
+        seed,
         alphas_deg: args.alphas.clone(),
         trials_per_alpha: args.trials,
         eval_pushes: args.eval,
@@ -395,17 +659,17 @@ fn progress_bar(total: u64) -> ProgressBar {
 
 /// Saves the AG file and its plot (each written whole, then renamed into place).
 fn write_files(
-    args: &BenchLearnArgs,
+    out: &Path,
     job: &Job,
     cfg: &LearnBenchConfig,
     report: &ObjectReport,
 ) -> Result<(PathBuf, PathBuf)> {
-    let ag_path = ag_path(&args.out, &job.scenario);
+    let ag_path = ag_path(out, &job.scenario);
     report
         .gradient
         .save(&ag_path)
         .with_context(|| format!("cannot save the AG of `{}`", job.scenario.name))?;
-    let plot_path = args.out.join(format!("{}.svg", job.stem));
+    let plot_path = out.join(format!("{}.svg", job.stem));
     let title = format!(
         "{}: learned affordance gradient (seed {}, {} trials per alpha, push {} s)",
         job.scenario.name, cfg.seed, cfg.trials_per_alpha, cfg.push.push_duration

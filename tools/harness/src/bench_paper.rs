@@ -1,16 +1,24 @@
 //! `agp bench paper`: the paper's three benchmarks on its objects (benchmarks.md), each
-//! run as its own `agp bench` command would, then our figures beside the paper's.
+//! run as its own `agp bench` command would, then our figures beside the paper's. With
+//! several seeds each seed learns its own AG files and runs the tasks on them; each
+//! benchmark's seeds are merged by that benchmark's own `merge`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use agp_planning::PlannerKind;
 use anyhow::{Context, Result};
-use serde_json::{Value, json};
+use serde_json::{Map, Value, json};
+
+use crate::seeds::{
+    SeedArgs, SeedParts, Shard, Spread, add_seed_fields, gather, longest_wall_time, number_at,
+    seed_list,
+};
 
 use crate::bench_learn::{self, BenchLearnArgs};
 use crate::bench_tasks::{self, BenchPlaceArgs};
 use crate::bench_trajectory::{self, BenchTrajectoryArgs};
+use crate::task_goals::NamedPath;
 
 /// The paper's figures (Sanchez-Fibla, Duff, Verschure; benchmarks.md).
 const PAPER_MAX_ROTATION_DEG: [(&str, f64); 3] = [("0", 39.51), ("15", 59.06), ("-15", 79.78)];
@@ -30,11 +38,14 @@ pub struct BenchPaperArgs {
     /// Placement episodes per planner and object (random goals 250 to 500 mm away).
     #[arg(long, default_value_t = 20)]
     pub episodes: usize,
-    /// Seed of every benchmark (noise, unseen pushes, goals).
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    /// Seeds of every benchmark (noise, unseen pushes, goals): each seed learns its own AG
+    /// files and runs the tasks on them.
+    #[command(flatten)]
+    pub seeds: SeedArgs,
     /// Folder for everything the benchmarks write: `learn/` (AG files and gradient plots),
-    /// `trajectory.{json,svg}`, `place-<object>.{json,svg}`.
+    /// `trajectory.{json,svg}`, `place-<object>.{json,svg}`; with several seeds, each
+    /// seed's in `seed-<S>/` and the merged `learn.json`, `trajectory.json` and
+    /// `place-<object>.json` at the top.
     #[arg(long, default_value = "results/paper")]
     pub out: PathBuf,
     /// Also write all the figures as one JSON object to this file.
@@ -46,135 +57,267 @@ pub struct BenchPaperArgs {
     pub in_process: bool,
 }
 
-/// Runs the three benchmarks and prints the comparison.
-pub fn run(args: &BenchPaperArgs) -> Result<Value> {
-    let wall = Instant::now();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("--out: cannot create the folder {}", args.out.display()))?;
-    let learn_dir = args.out.join("learn");
+/// The one-seed document inside a benchmark's document: its only `per_seed` entry, or the
+/// document itself when it has no `per_seed`.
+fn one_seed(doc: Value) -> Value {
+    match doc.get("per_seed").and_then(Value::as_array) {
+        Some(list) if list.len() == 1 => list[0].clone(),
+        _ => doc,
+    }
+}
 
-    println!("== 1/3 learning phase ==");
+/// One seed of the paper: learning at `seed` into `dir/learn/`, the trajectory and the
+/// placements on that seed with that seed's AG files; each benchmark's one-seed document.
+fn run_seed(args: &BenchPaperArgs, seed: u64, dir: &Path) -> Result<Value> {
+    let started = Instant::now();
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("--out: cannot create the folder {}", dir.display()))?;
+    let learn_dir = dir.join("learn");
+    println!("== seed {seed}: 1/3 learning phase ==");
     let learn = bench_learn::learn(&BenchLearnArgs {
-        seed: args.seed,
-        json: Some(args.out.join("learn.json")),
+        seeds: SeedArgs::one(seed),
+        json: Some(dir.join("learn.json")),
         ..BenchLearnArgs::for_scenarios(&LEARN_OBJECTS, learn_dir.clone())
     })?;
     let ag = |object: &str| Some(learn_dir.join(format!("{object}.ag")));
 
-    println!("\n== 2/3 push along a trajectory ==");
+    println!("\n== seed {seed}: 2/3 push along a trajectory ==");
     let trajectory = bench_trajectory::run_trajectory(&BenchTrajectoryArgs {
         scenario: TRAJECTORY_OBJECT.into(),
+        // The paper's 600 mm line and the bent paths of the set (task_goals.rs).
+        paths: NamedPath::SET.to_vec(),
         ag: ag(TRAJECTORY_OBJECT),
-        seed: Some(args.seed),
+        seeds: SeedArgs::one(seed),
         in_process: args.in_process,
-        json: Some(args.out.join("trajectory.json")),
-        plot: Some(args.out.join("trajectory.svg")),
+        json: Some(dir.join("trajectory.json")),
+        plot: Some(dir.join("trajectory.svg")),
     })?;
 
-    println!("\n== 3/3 position and orientation ==");
-    let mut place = serde_json::Map::new();
+    println!("\n== seed {seed}: 3/3 position and orientation ==");
+    let mut place = Map::new();
     for object in PLACE_OBJECTS {
         let doc = bench_tasks::run_place(&BenchPlaceArgs {
             scenario: object.into(),
             episodes: args.episodes,
-            seed: Some(args.seed),
+            seeds: SeedArgs::one(seed),
             planners: PlannerKind::ALL.to_vec(),
             ag: ag(object),
             in_process: args.in_process,
-            json: Some(args.out.join(format!("place-{object}.json"))),
-            plot: Some(args.out.join(format!("place-{object}.svg"))),
+            json: Some(dir.join(format!("place-{object}.json"))),
+            plot: Some(dir.join(format!("place-{object}.svg"))),
         })?;
-        place.insert(object.into(), doc);
+        place.insert(object.into(), one_seed(doc));
         println!();
     }
-    let wall_time_s = wall.elapsed().as_secs_f64();
-    let doc = json!({
+    Ok(json!({
         "benchmark": "paper",
-        "seed": args.seed,
+        "seed": seed,
         "physics": if args.in_process { "in-process" } else { "pipeline" },
-        "learn": learn,
-        "trajectory": trajectory,
+        "episodes": args.episodes,
+        "learn": one_seed(learn),
+        "trajectory": one_seed(trajectory),
         "place": place,
-        "paper": {
-            "max_rotation_deg": PAPER_MAX_ROTATION_DEG.iter().map(|(k, v)| ((*k).to_owned(), json!(v))).collect::<serde_json::Map<_, _>>(),
-            "trajectory": {
-                "affordance": PAPER_TRAJECTORY_AFFORDANCE,
-                "baseline": PAPER_TRAJECTORY_BASELINE,
-                "ratio": PAPER_TRAJECTORY_AFFORDANCE / PAPER_TRAJECTORY_BASELINE,
-            },
-        },
-        "wall_time_s": wall_time_s,
-    });
-    print_comparison(&doc, args);
+        "wall_time_s": started.elapsed().as_secs_f64(),
+    }))
+}
+
+/// Runs the three benchmarks at every seed of this run (its shard's share with `--shard`),
+/// merges each benchmark over the seeds and prints the comparison.
+pub fn run(args: &BenchPaperArgs) -> Result<Value> {
+    let wall = Instant::now();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("--out: cannot create the folder {}", args.out.display()))?;
+    let all_seeds = args.seeds.all();
+    let seeds = args.seeds.mine();
+    let mut docs = Vec::with_capacity(seeds.len());
+    for &seed in &seeds {
+        let dir = if all_seeds.len() > 1 {
+            args.out.join(format!("seed-{seed}"))
+        } else {
+            args.out.clone()
+        };
+        docs.push(run_seed(args, seed, &dir)?);
+    }
+    let parts = gather(&docs, "paper", paper_signature).map_err(anyhow::Error::new)?;
+    let parts = SeedParts {
+        seeds: all_seeds.clone(),
+        ..parts
+    };
+    let mut doc = assemble(&parts, args.seeds.shard)?;
+    doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
+    if all_seeds.len() > 1 {
+        // Each benchmark's merged document beside the seeds' folders, as its own command
+        // writes it.
+        bench_tasks::write_json(&args.out.join("learn.json"), &doc["learn"])?;
+        bench_tasks::write_json(&args.out.join("trajectory.json"), &doc["trajectory"])?;
+        for object in PLACE_OBJECTS {
+            bench_tasks::write_json(
+                &args.out.join(format!("place-{object}.json")),
+                &doc["place"][object],
+            )?;
+        }
+    }
+    print_comparison(&doc, args.episodes);
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&doc).context("cannot encode the JSON")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        bench_tasks::write_json(path, &doc)?;
         println!("JSON     {}", path.display());
     }
     Ok(doc)
 }
 
+/// What must be alike in every seed of one paper run.
+fn paper_signature(doc: &Value) -> Value {
+    json!({ "physics": doc["physics"], "episodes": doc["episodes"] })
+}
+
+/// The paper document of `parts`: each benchmark merged over the seeds by its own merge,
+/// the paper's figures, `seeds`, `per_seed` (and `shard`).
+fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Result<Value> {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let first = docs[0];
+    let pick = |key: &str| docs.iter().map(|d| d[key].clone()).collect::<Vec<_>>();
+    let learn = bench_learn::merge(&pick("learn")).context("cannot merge the learning runs")?;
+    let trajectory =
+        bench_trajectory::merge(&pick("trajectory")).context("cannot merge the trajectory runs")?;
+    let mut place = Map::new();
+    for object in PLACE_OBJECTS {
+        let runs: Vec<Value> = docs.iter().map(|d| d["place"][object].clone()).collect();
+        place.insert(
+            object.into(),
+            bench_tasks::merge(&runs)
+                .with_context(|| format!("cannot merge the placements of `{object}`"))?,
+        );
+    }
+    let mut doc = Map::new();
+    doc.insert("benchmark".into(), json!("paper"));
+    doc.insert("seed".into(), first["seed"].clone());
+    doc.insert("physics".into(), first["physics"].clone());
+    doc.insert("episodes".into(), first["episodes"].clone());
+    doc.insert("learn".into(), learn);
+    doc.insert("trajectory".into(), trajectory);
+    doc.insert("place".into(), Value::Object(place));
+    doc.insert(
+        "paper".into(),
+        json!({
+            "max_rotation_deg": PAPER_MAX_ROTATION_DEG.iter().map(|(k, v)| ((*k).to_owned(), json!(v))).collect::<Map<_, _>>(),
+            "trajectory": {
+                "affordance": PAPER_TRAJECTORY_AFFORDANCE,
+                "baseline": PAPER_TRAJECTORY_BASELINE,
+                "ratio": PAPER_TRAJECTORY_AFFORDANCE / PAPER_TRAJECTORY_BASELINE,
+            },
+        }),
+    );
+    add_seed_fields(&mut doc, parts, shard);
+    let wall = docs
+        .iter()
+        .map(|d| number_at(d, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .sum::<f64>();
+    doc.insert("wall_time_s".into(), json!(wall));
+    Ok(Value::Object(doc))
+}
+
+/// Merges paper documents of disjoint seed sets (one-seed documents, whole runs or a run's
+/// shards) into the document one run over all their seeds writes; `wall_time_s` is the
+/// longest part's.
+pub fn merge(parts: &[Value]) -> Result<Value> {
+    let gathered = gather(parts, "paper", paper_signature).map_err(anyhow::Error::new)?;
+    let mut doc = assemble(&gathered, None)?;
+    doc["wall_time_s"] = json!(longest_wall_time(parts));
+    Ok(doc)
+}
+
 fn num(v: &Value, path: &[&str]) -> f64 {
-    path.iter()
-        .try_fold(v, |v, k| v.get(*k))
-        .and_then(Value::as_f64)
-        .unwrap_or(f64::NAN)
+    number_at(v, path)
 }
 
 fn met(ok: bool) -> &'static str {
     if ok { "met   " } else { "MISSED" }
 }
 
-fn print_comparison(doc: &Value, args: &BenchPaperArgs) {
+/// A figure of a benchmark's document over its seeds: one seed's value, or `mean (min-max)`
+/// over the seeds (from its `per_seed`); "n/a" when no seed has it (a disc's rotation).
+fn over_seeds(bench: &Value, path: &[&str], scale: f64, decimals: usize) -> String {
+    let values: Vec<f64> = match bench["per_seed"].as_array() {
+        Some(list) if !list.is_empty() => list.iter().map(|d| scale * num(d, path)).collect(),
+        _ => vec![scale * num(bench, path)],
+    };
+    Spread::of(&values).map_or_else(|| "n/a".to_owned(), |s| s.show(decimals))
+}
+
+fn print_comparison(doc: &Value, episodes: usize) {
+    let seeds: Vec<u64> = doc["seeds"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_u64).collect())
+        .unwrap_or_default();
+    let own: Vec<u64> = doc["per_seed"]
+        .as_array()
+        .map(|a| a.iter().filter_map(|d| d["seed"].as_u64()).collect())
+        .unwrap_or_default();
     println!(
-        "\n== agp bench paper: our figures beside the paper's (seed {}, {}) ==",
-        args.seed,
-        if args.in_process {
+        "\n== agp bench paper: our figures beside the paper's ({} {}{}, {}) ==",
+        if own.len() == 1 { "seed" } else { "seeds" },
+        seed_list(&own),
+        doc["shard"]
+            .as_str()
+            .map(|s| format!(", shard {s} of seeds {}", seed_list(&seeds)))
+            .unwrap_or_default(),
+        if doc["physics"] == "in-process" {
             "tasks in-process"
         } else {
             "tasks over the pipeline"
         }
     );
-    let learn = &doc["learn"]["objects"];
+    if own.len() > 1 {
+        println!("each figure of ours: mean (min-max) over the seeds, each seed its own AG files");
+    }
+    let w = if own.len() > 1 { 22 } else { 8 };
+    let learn = &doc["learn"];
     println!("learning, largest rotation of a single push (triangle), deg:");
-    println!("    {:<8} {:>8} {:>8}", "alpha", "ours", "paper");
+    println!("    {:<8} {:>w$} {:>8}", "alpha", "ours", "paper");
     for (alpha, paper) in PAPER_MAX_ROTATION_DEG {
         println!(
-            "    {:<8} {:>8.2} {:>8.2}",
+            "    {:<8} {:>w$} {:>8.2}",
             format!("{alpha:>3}"),
-            num(learn, &["triangle", "max_rotation_deg", alpha]),
+            over_seeds(
+                learn,
+                &["objects", "triangle", "max_rotation_deg", alpha],
+                1.0,
+                2
+            ),
             paper
         );
     }
     println!("learning, 200 unseen pushes predicted (median errors; the paper gives no figure):");
     println!(
-        "    {:<10} {:>14} {:>18}",
-        "object", "rotation deg", "displacement ratio"
+        "    {:<10} {:>w2$} {:>w2$}",
+        "object",
+        "rotation deg",
+        "displacement ratio",
+        w2 = w.max(18)
     );
-    // A figure the JSON holds as null (a disc's rotation, which IR cannot see) as "n/a".
-    let fixed = |x: f64, decimals: usize| {
-        if x.is_finite() {
-            format!("{x:.decimals$}")
-        } else {
-            "n/a".to_owned()
-        }
-    };
     for object in LEARN_OBJECTS {
         println!(
-            "    {:<10} {:>14} {:>18}",
+            "    {:<10} {:>w2$} {:>w2$}",
             object,
-            fixed(
-                num(learn, &[object, "prediction", "median_rotation_error_deg"]),
+            over_seeds(
+                learn,
+                &["objects", object, "prediction", "median_rotation_error_deg"],
+                1.0,
                 2
             ),
-            fixed(
-                num(
-                    learn,
-                    &[object, "prediction", "median_displacement_error_ratio"]
-                ),
+            over_seeds(
+                learn,
+                &[
+                    "objects",
+                    object,
+                    "prediction",
+                    "median_displacement_error_ratio"
+                ],
+                1.0,
                 3
-            )
+            ),
+            w2 = w.max(18)
         );
     }
     let t = &doc["trajectory"];
@@ -183,48 +326,63 @@ fn print_comparison(doc: &Value, args: &BenchPaperArgs) {
         "trajectory ({TRAJECTORY_OBJECT}), mean distance of the centroid to the line per point:"
     );
     println!(
-        "    ours   affordance {:.2} mm, baseline {:.2} mm, ratio {:.2}",
-        num(t, &["planners", "affordance", "mean_error_mm"]),
-        num(t, &["planners", "baseline", "mean_error_mm"]),
-        ratio
+        "    ours   affordance {} mm, baseline {} mm, ratio {}",
+        over_seeds(t, &["planners", "affordance", "mean_error_mm"], 1.0, 2),
+        over_seeds(t, &["planners", "baseline", "mean_error_mm"], 1.0, 2),
+        over_seeds(t, &["ratio"], 1.0, 2)
     );
+    if own.len() > 1 {
+        println!("           ratio of the mean errors over the seeds {ratio:.2}");
+    }
     println!(
         "    paper  affordance {PAPER_TRAJECTORY_AFFORDANCE} units, baseline {PAPER_TRAJECTORY_BASELINE} units, ratio {:.2}",
         PAPER_TRAJECTORY_AFFORDANCE / PAPER_TRAJECTORY_BASELINE
     );
     println!(
-        "placement, {} episodes per planner, within the scenario's 10 mm / 10 deg (the paper shows two runs, no figure):",
-        args.episodes
+        "placement, {episodes} episodes per planner{}, within the scenario's 10 mm / 10 deg (the paper shows two runs, no figure):",
+        if own.len() > 1 { " and seed" } else { "" }
     );
     println!(
-        "    {:<10} {:<12} {:>8} {:>14} {:>12} {:>12}",
-        "object", "planner", "success", "median pushes", "pos err mm", "ori err deg"
+        "    {:<10} {:<12} {:>w$} {:>w$} {:>w$} {:>w$}",
+        "object", "planner", "success %", "median pushes", "pos err mm", "ori err deg"
     );
     let mut place_ok = true;
     for object in PLACE_OBJECTS {
+        let p = &doc["place"][object];
         for planner in PlannerKind::ALL {
-            let p = &doc["place"][object]["planners"][planner.name()];
-            let rate = num(p, &["success_rate"]);
+            let name = planner.name();
             if planner == PlannerKind::Affordance {
-                place_ok &= rate >= TARGET_PLACE_SUCCESS;
+                place_ok &= num(p, &["planners", name, "success_rate"]) >= TARGET_PLACE_SUCCESS;
             }
             println!(
-                "    {:<10} {:<12} {:>7.0}% {:>14.1} {:>12.1} {:>12.1}",
+                "    {:<10} {:<12} {:>w$} {:>w$} {:>w$} {:>w$}",
                 object,
                 if planner.reads_ground_truth() {
                     "oracle (GT)"
                 } else {
-                    planner.name()
+                    name
                 },
-                100.0 * rate,
-                num(p, &["median_pushes"]),
-                num(p, &["median_position_error_mm"]),
-                num(p, &["median_orientation_error_deg"])
+                over_seeds(p, &["planners", name, "success_rate"], 100.0, 0),
+                over_seeds(p, &["planners", name, "median_pushes"], 1.0, 1),
+                over_seeds(p, &["planners", name, "median_position_error_mm"], 1.0, 1),
+                over_seeds(
+                    p,
+                    &["planners", name, "median_orientation_error_deg"],
+                    1.0,
+                    1
+                )
             );
         }
     }
     println!("    (GT) the oracle reads the object's true pose: an upper bound, not a result");
-    println!("targets:");
+    println!(
+        "targets{}:",
+        if own.len() > 1 {
+            " (over all seeds)"
+        } else {
+            ""
+        }
+    );
     println!(
         "    {} trajectory ratio affordance / baseline <= {TARGET_TRAJECTORY_RATIO} (paper 0.73): {ratio:.2}",
         met(ratio <= TARGET_TRAJECTORY_RATIO)

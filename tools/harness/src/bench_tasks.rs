@@ -11,11 +11,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::{PlannerSummary, place_goals, run_episode};
+use crate::seeds::Spread;
+use crate::{median, place_goals, run_episode};
 use agp_affordance::AffordanceGradient;
-use agp_planning::{
-    EpisodeConfig, EpisodeResult, EstimateVerdict, Evaluation, PlannerKind, PoseSample, Task,
-};
+use agp_planning::{EpisodeConfig, EpisodeResult, Evaluation, PlannerKind, PoseSample, Task};
 use agp_shared_types::Pose2;
 use agp_world::{ObjectShape, RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -28,6 +27,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
+use serde_json::{Map, Value, json};
+
+use crate::seeds::{
+    SeedArgs, SeedParts, Shard, add_seed_fields, finite_or_null, gather, longest_wall_time,
+    number_at, seed_list, spread_at,
+};
 
 /// What every bench output says about where the physics ran.
 const PIPELINE_NOTE: &str =
@@ -44,9 +49,9 @@ pub struct BenchPlaceArgs {
     /// Episodes per planner: random goals 250 to 500 mm from the start, any orientation.
     #[arg(long, default_value_t = 20)]
     pub episodes: usize,
-    /// Seed of the goals and of the sensor noise (default: the scenario's).
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// Seeds of the goals and of the sensor noise: each seed its own goals and episodes.
+    #[command(flatten)]
+    pub seeds: SeedArgs,
     /// Planners to run, comma-separated: affordance, baseline, oracle.
     #[arg(
         long,
@@ -65,52 +70,10 @@ pub struct BenchPlaceArgs {
     /// Also write the result as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Also draw the first episode of each planner (object every few steps, goal
-    /// outline, as the paper's Fig. 7) to this SVG file.
+    /// Also draw the first episode of each planner at the first seed (object every few
+    /// steps, goal outline, as the paper's Fig. 7) to this SVG file.
     #[arg(long)]
     pub plot: Option<PathBuf>,
-}
-
-#[derive(Debug, Serialize)]
-struct PlaceEpisodeJson {
-    goal_x_mm: f64,
-    goal_y_mm: f64,
-    goal_theta_deg: f64,
-    success: bool,
-    end: &'static str,
-    position_error_mm: f64,
-    orientation_error_deg: f64,
-    pushes: u32,
-    circlings: u32,
-    sim_time_s: f64,
-    wall_time_s: f64,
-    /// The estimator's estimates of the episode, judged.
-    estimate: Option<EstimateVerdict>,
-}
-
-#[derive(Debug, Serialize)]
-struct PlacePlannerJson {
-    episodes: usize,
-    success_rate: f64,
-    median_position_error_mm: f64,
-    median_orientation_error_deg: f64,
-    median_pushes: f64,
-    sim_time_s: f64,
-    wall_time_s: f64,
-    reads_ground_truth: bool,
-    runs: Vec<PlaceEpisodeJson>,
-}
-
-#[derive(Debug, Serialize)]
-struct PlaceJson {
-    benchmark: &'static str,
-    scenario: String,
-    seed: u64,
-    physics: &'static str,
-    tolerance_mm: f64,
-    tolerance_deg: f64,
-    planners: BTreeMap<String, PlacePlannerJson>,
-    wall_time_s: f64,
 }
 
 /// The AG file the affordance and oracle planners use: `path`, or the learning
@@ -162,15 +125,18 @@ pub(crate) enum Runner<'a> {
 }
 
 impl<'a> Runner<'a> {
-    /// A runner for `planner`'s episodes: each planner gets a fresh physics seeded with
-    /// `seed`, so its results do not depend on which planners ran before it.
-    pub(crate) fn start(
+    /// A runner for `planner`'s episodes: each (planner, seed) gets a fresh physics seeded
+    /// with `seed`, so its results do not depend on what ran before it. Over the pipeline
+    /// its instance is `bench-<pid>-<tag>`: short (iceoryx2's socket paths), and telling
+    /// apart the pipelines that run at once.
+    pub(crate) fn start_tagged(
         in_process: bool,
         scenario_arg: &str,
         scenario: &'a Scenario,
         ag: Option<&Path>,
         planner: PlannerKind,
         seed: u64,
+        tag: &str,
     ) -> Result<Self> {
         let ag = ag.filter(|_| planner.needs_gradient());
         if in_process {
@@ -191,9 +157,7 @@ impl<'a> Runner<'a> {
                 scenario_arg,
                 ag,
                 seed,
-                // Instance names are short (iceoryx2's socket paths): three letters tell
-                // the planners apart.
-                planner.name().get(..3).unwrap_or(planner.name()),
+                tag,
             )?))
         }
     }
@@ -281,8 +245,10 @@ pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     std::fs::write(path, text + "\n").with_context(|| format!("cannot write `{}`", path.display()))
 }
 
-/// Runs `agp bench place`.
-pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
+/// Runs `agp bench place`: every seed of this run (its shard's share with `--shard`), each
+/// seed its own goals, each (seed, planner) its own freshly seeded pipeline side by side on
+/// the cores; the one-seed documents merged by [`merge`] into the result.
+pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
     let wall = Instant::now();
     if args.episodes == 0 {
         bail!("`--episodes` must be at least 1");
@@ -299,30 +265,53 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
         &args.planners,
     )?;
     let note = physics_note(args.in_process);
-    let seed = args.seed.unwrap_or(scenario.task.seed);
+    let all_seeds = args.seeds.all();
+    let seeds = args.seeds.mine();
     let mut planners = args.planners.clone();
     planners.sort();
     planners.dedup();
     let base = EpisodeConfig::for_task(&scenario.task);
-    let goals = place_goals(&scenario, args.episodes, seed);
 
     eprintln!(
-        "bench place: scenario `{}`, {} episodes per planner, seed {seed}; {note}",
-        scenario.name, args.episodes
+        "bench place: scenario `{}`, {} episodes per planner and seed, seeds {}{}; {note}",
+        scenario.name,
+        args.episodes,
+        seed_list(&seeds),
+        args.seeds
+            .shard
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
+            .unwrap_or_default()
     );
     if planners.contains(&PlannerKind::Oracle) {
         eprintln!("{ORACLE_NOTE}");
     }
-    let bar = progress((goals.len() * planners.len()) as u64);
+    let work: Vec<(u64, PlannerKind)> = seeds
+        .iter()
+        .flat_map(|&seed| planners.iter().map(move |&p| (seed, p)))
+        .collect();
+    let bar = progress((args.episodes * work.len()) as u64);
     bar.set_prefix(prefix_of(&planners));
-    let runs = side_by_side(&planners, |&planner| {
-        let mut runner = Runner::start(
+    // Two pipelines of one planner may run at once when seeds run side by side: the seed
+    // tells their instances apart.
+    let tag = |planner: PlannerKind, seed: u64| {
+        let short = planner.name().get(..3).unwrap_or(planner.name());
+        if seeds.len() > 1 {
+            format!("{short}{seed}")
+        } else {
+            short.to_owned()
+        }
+    };
+    let runs = side_by_side(&work, |&(seed, planner)| {
+        let started = Instant::now();
+        let goals = place_goals(&scenario, args.episodes, seed);
+        let mut runner = Runner::start_tagged(
             args.in_process,
             &args.scenario,
             &scenario,
             ag.as_deref(),
             planner,
             seed,
+            &tag(planner, seed),
         )?;
         let mut runs = Vec::with_capacity(goals.len());
         let episodes = (|| -> Result<()> {
@@ -333,7 +322,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
                 };
                 let r = runner
                     .episode(planner, &Task::Place { goal: *goal }, &config)
-                    .with_context(|| format!("planner `{planner}`, episode {k}"))?;
+                    .with_context(|| format!("planner `{planner}`, seed {seed}, episode {k}"))?;
                 runs.push(r);
                 bar.inc(1);
             }
@@ -343,98 +332,61 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
         let finished = runner.finish();
         episodes?;
         finished?;
-        Ok(runs)
+        Ok((runs, started.elapsed().as_secs_f64()))
     })
     .into_iter()
     .collect::<Result<Vec<_>>>()?;
-    let results: BTreeMap<PlannerKind, Vec<EpisodeResult>> =
-        planners.iter().copied().zip(runs).collect();
     bar.finish_and_clear();
-    let wall_time_s = wall.elapsed().as_secs_f64();
 
-    println!(
-        "place `{}`: {} episodes per planner, seed {seed}, tolerance {:.0} mm / {:.0} deg; {note}",
-        scenario.name,
-        args.episodes,
-        base.tolerance_m * 1e3,
-        base.tolerance_rad.to_degrees()
-    );
-    println!(
-        "{:<12} {:>8} {:>8} {:>12} {:>12} {:>8} {:>10} {:>8}",
-        "planner", "episodes", "success", "pos err mm", "ori err deg", "pushes", "sim s", "wall s"
-    );
-    let mut json_planners = BTreeMap::new();
-    for (planner, runs) in &results {
-        let s = PlannerSummary::of(runs);
-        let label = if planner.reads_ground_truth() {
-            format!("{planner} (GT)")
-        } else {
-            planner.name().to_owned()
-        };
-        println!(
-            "{:<12} {:>8} {:>7.0}% {:>12.1} {:>12.1} {:>8.1} {:>10.0} {:>8.1}",
-            label,
-            s.episodes,
-            100.0 * s.success_rate,
-            s.median_position_error_mm,
-            s.median_orientation_error_deg,
-            s.median_pushes,
-            s.sim_time_s,
-            s.wall_time_s
-        );
-        json_planners.insert(
-            planner.name().to_owned(),
-            PlacePlannerJson {
-                episodes: s.episodes,
-                success_rate: s.success_rate,
-                median_position_error_mm: s.median_position_error_mm,
-                median_orientation_error_deg: s.median_orientation_error_deg,
-                median_pushes: s.median_pushes,
-                sim_time_s: s.sim_time_s,
-                wall_time_s: s.wall_time_s,
-                reads_ground_truth: planner.reads_ground_truth(),
-                runs: runs
-                    .iter()
-                    .zip(&goals)
-                    .map(|(r, g)| PlaceEpisodeJson {
-                        goal_x_mm: g.x * 1e3,
-                        goal_y_mm: g.y * 1e3,
-                        goal_theta_deg: g.theta.to_degrees(),
-                        success: r.success(),
-                        end: r.end.name(),
-                        position_error_mm: judged(r).position_error_mm,
-                        orientation_error_deg: judged(r).orientation_error_deg,
-                        pushes: r.pushes,
-                        circlings: r.circlings,
-                        sim_time_s: r.sim_time_s,
-                        wall_time_s: r.wall_time_s,
-                        estimate: r.estimate_verdict,
-                    })
-                    .collect(),
-            },
-        );
+    let tolerance = (base.tolerance_m * 1e3, base.tolerance_rad.to_degrees());
+    let mut docs = Vec::with_capacity(seeds.len());
+    let mut first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
+    let mut runs = runs.into_iter();
+    for &seed in &seeds {
+        let goals = place_goals(&scenario, args.episodes, seed);
+        let mut planners_json = Map::new();
+        let mut wall_s: f64 = 0.0;
+        for &planner in &planners {
+            let (results, planner_wall_s) = runs
+                .next()
+                .context("a (seed, planner) pair without its episodes")?;
+            wall_s = wall_s.max(planner_wall_s);
+            planners_json.insert(
+                planner.name().to_owned(),
+                planner_json(planner, seed, &results, &goals),
+            );
+            if first_seed_runs.len() < planners.len() && seed == seeds[0] {
+                first_seed_runs.insert(planner, results);
+            }
+        }
+        docs.push(json!({
+            "benchmark": "place",
+            "scenario": scenario.name,
+            "seed": seed,
+            "physics": physics_label(args.in_process),
+            "tolerance_mm": tolerance.0,
+            "tolerance_deg": tolerance.1,
+            "planners": planners_json,
+            "wall_time_s": wall_s,
+        }));
     }
-    if results.contains_key(&PlannerKind::Oracle) {
-        println!("(GT) {ORACLE_NOTE}");
-    }
+    let parts = gather(&docs, "place", place_signature).map_err(anyhow::Error::new)?;
+    let parts = SeedParts {
+        seeds: all_seeds,
+        ..parts
+    };
+    let mut doc = assemble(&parts, args.seeds.shard);
+    let wall_time_s = wall.elapsed().as_secs_f64();
+    doc["wall_time_s"] = json!(wall_time_s);
+    print_place(&doc, note);
     println!("wall time {wall_time_s:.1} s");
-    let doc = serde_json::to_value(PlaceJson {
-        benchmark: "place",
-        scenario: scenario.name.clone(),
-        seed,
-        physics: physics_label(args.in_process),
-        tolerance_mm: base.tolerance_m * 1e3,
-        tolerance_deg: base.tolerance_rad.to_degrees(),
-        planners: json_planners,
-        wall_time_s,
-    })
-    .context("cannot encode the result")?;
     if let Some(path) = &args.json {
         write_json(path, &doc)?;
         println!("JSON     {}", path.display());
     }
     if let Some(path) = &args.plot {
-        let panels: Vec<Panel> = results
+        let seed = seeds[0];
+        let panels: Vec<Panel> = first_seed_runs
             .iter()
             .filter_map(|(planner, runs)| {
                 let r = runs.first()?;
@@ -456,9 +408,9 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
                 })
             })
             .collect();
-        let goal = goals[0];
+        let goal = place_goals(&scenario, 1, seed)[0];
         let title = format!(
-            "place `{}`: first episode per planner, goal outline in red ({note})",
+            "place `{}`: first episode per planner at seed {seed}, goal outline in red ({note})",
             scenario.name
         );
         plot_runs(
@@ -471,6 +423,245 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<serde_json::Value> {
         println!("plot     {}", path.display());
     }
     Ok(doc)
+}
+
+/// One planner's episodes at one seed, as the JSON holds them: each run, and the figures
+/// computed from the runs alone (as [`merge`] computes them over seeds).
+fn planner_json(
+    planner: PlannerKind,
+    seed: u64,
+    results: &[EpisodeResult],
+    goals: &[Pose2],
+) -> Value {
+    let runs: Vec<Value> = results
+        .iter()
+        .zip(goals)
+        .map(|(r, g)| {
+            json!({
+                "seed": seed,
+                "goal_x_mm": g.x * 1e3,
+                "goal_y_mm": g.y * 1e3,
+                "goal_theta_deg": g.theta.to_degrees(),
+                "success": r.success(),
+                "end": r.end.name(),
+                "position_error_mm": finite_or_null(judged(r).position_error_mm),
+                "orientation_error_deg": finite_or_null(judged(r).orientation_error_deg),
+                "pushes": r.pushes,
+                "circlings": r.circlings,
+                "sim_time_s": r.sim_time_s,
+                "wall_time_s": r.wall_time_s,
+                "estimate": r.estimate_verdict,
+            })
+        })
+        .collect();
+    summarise_runs(planner.reads_ground_truth(), runs)
+}
+
+/// The planner figures of the contract over `runs` (episodes of one or many seeds):
+/// success rate, median errors and pushes (`median`: NaN-free values; none is null), sim
+/// and wall time summed in the runs' order.
+fn summarise_runs(reads_ground_truth: bool, runs: Vec<Value>) -> Value {
+    let pick = |key: &str| {
+        runs.iter()
+            .map(|r| number_at(r, &[key]))
+            .collect::<Vec<_>>()
+    };
+    let n = runs.len();
+    let successes = runs.iter().filter(|r| r["success"] == true).count();
+    let sum = |key: &str| pick(key).iter().filter(|v| v.is_finite()).sum::<f64>();
+    json!({
+        "episodes": n,
+        "success_rate": if n == 0 { 0.0 } else { successes as f64 / n as f64 },
+        "median_position_error_mm": finite_or_null(median(&pick("position_error_mm"))),
+        "median_orientation_error_deg": finite_or_null(median(&pick("orientation_error_deg"))),
+        "median_pushes": finite_or_null(median(&pick("pushes"))),
+        "sim_time_s": sum("sim_time_s"),
+        "wall_time_s": sum("wall_time_s"),
+        "reads_ground_truth": reads_ground_truth,
+        "runs": runs,
+    })
+}
+
+/// The figures of the place JSON that get a spread over seeds.
+const PLACE_FIGURES: [&str; 5] = [
+    "success_rate",
+    "median_position_error_mm",
+    "median_orientation_error_deg",
+    "median_pushes",
+    "sim_time_s",
+];
+
+/// What must be alike in every seed of one place run.
+fn place_signature(doc: &Value) -> Value {
+    let planners: Map<String, Value> = doc["planners"]
+        .as_object()
+        .map(|m| {
+            m.iter()
+                .map(|(k, p)| (k.clone(), p["episodes"].clone()))
+                .collect()
+        })
+        .unwrap_or_default();
+    json!({
+        "scenario": doc["scenario"],
+        "physics": doc["physics"],
+        "tolerance_mm": doc["tolerance_mm"],
+        "tolerance_deg": doc["tolerance_deg"],
+        "episodes per planner": planners,
+    })
+}
+
+/// The place document of `parts`: every planner's figures over all episodes of all seeds,
+/// each figure's spread over the seeds, `seeds`, `per_seed` (and `shard`). Its
+/// `wall_time_s` is the longest seed's; the caller sets the run's own.
+fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let first = docs[0];
+    let mut planners = Map::new();
+    if let Some(names) = first["planners"].as_object() {
+        for (name, p) in names {
+            let runs: Vec<Value> = docs
+                .iter()
+                .flat_map(|d| {
+                    d["planners"][name]["runs"]
+                        .as_array()
+                        .cloned()
+                        .unwrap_or_default()
+                })
+                .collect();
+            let mut summary = summarise_runs(p["reads_ground_truth"] == true, runs);
+            let spread: Map<String, Value> = PLACE_FIGURES
+                .iter()
+                .map(|f| {
+                    (
+                        (*f).to_owned(),
+                        spread_at(docs.iter().copied(), &["planners", name, f]),
+                    )
+                })
+                .collect();
+            summary["spread"] = Value::Object(spread);
+            planners.insert(name.clone(), summary);
+        }
+    }
+    let mut doc = Map::new();
+    doc.insert("benchmark".into(), json!("place"));
+    doc.insert("scenario".into(), first["scenario"].clone());
+    doc.insert("seed".into(), first["seed"].clone());
+    doc.insert("physics".into(), first["physics"].clone());
+    doc.insert("tolerance_mm".into(), first["tolerance_mm"].clone());
+    doc.insert("tolerance_deg".into(), first["tolerance_deg"].clone());
+    doc.insert("planners".into(), Value::Object(planners));
+    add_seed_fields(&mut doc, parts, shard);
+    let wall = docs
+        .iter()
+        .map(|d| number_at(d, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    doc.insert("wall_time_s".into(), json!(wall));
+    Value::Object(doc)
+}
+
+/// Merges place documents of disjoint seed sets (one-seed documents, whole runs or a run's
+/// shards) into the document one run over all their seeds writes, seeds in order. Every
+/// figure is recomputed from the episodes; `wall_time_s` is the longest part's.
+pub fn merge(parts: &[Value]) -> Result<Value> {
+    let gathered = gather(parts, "place", place_signature).map_err(anyhow::Error::new)?;
+    let mut doc = assemble(&gathered, None);
+    doc["wall_time_s"] = json!(longest_wall_time(parts));
+    Ok(doc)
+}
+
+/// The human table of a place document: one row per planner, each figure as one seed's
+/// value or `mean (min-max)` over the seeds.
+pub fn print_place(doc: &Value, note: &str) {
+    let docs: Vec<&Value> = doc["per_seed"]
+        .as_array()
+        .map(|a| a.iter().collect())
+        .unwrap_or_default();
+    let seeds: Vec<u64> = doc["seeds"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_u64).collect())
+        .unwrap_or_default();
+    let own: Vec<u64> = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
+    let many = own.len() > 1;
+    let first = docs.first().copied().unwrap_or(doc);
+    let episodes = first["planners"]
+        .as_object()
+        .and_then(|m| m.values().next())
+        .map_or(0.0, |p| number_at(p, &["episodes"]));
+    println!(
+        "place `{}`: {episodes} episodes per planner and seed, {} {}{}, tolerance {:.0} mm / {:.0} deg; {note}",
+        doc["scenario"].as_str().unwrap_or("?"),
+        if own.len() == 1 { "seed" } else { "seeds" },
+        seed_list(&own),
+        doc["shard"]
+            .as_str()
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
+            .unwrap_or_default(),
+        number_at(doc, &["tolerance_mm"]),
+        number_at(doc, &["tolerance_deg"])
+    );
+    if many {
+        println!("each figure: mean (min-max) over the seeds");
+    }
+    let w = if many { 20 } else { 12 };
+    println!(
+        "{:<12} {:>8} {:>w$} {:>w$} {:>w$} {:>w$} {:>w$} {:>8}",
+        "planner",
+        "episodes",
+        "success %",
+        "pos err mm",
+        "ori err deg",
+        "pushes",
+        "sim s",
+        "wall s"
+    );
+    let shown = |name: &str, key: &str, scale: f64, decimals: usize| {
+        let values: Vec<f64> = docs
+            .iter()
+            .map(|d| scale * number_at(d, &["planners", name, key]))
+            .collect();
+        Spread::of(&values).map_or_else(|| "-".to_owned(), |s| s.show(decimals))
+    };
+    let mut any_oracle = false;
+    if let Some(planners) = doc["planners"].as_object() {
+        for (name, p) in planners {
+            let gt = p["reads_ground_truth"] == true;
+            any_oracle |= gt;
+            println!(
+                "{:<12} {:>8} {:>w$} {:>w$} {:>w$} {:>w$} {:>w$} {:>8.1}",
+                if gt {
+                    format!("{name} (GT)")
+                } else {
+                    name.clone()
+                },
+                number_at(p, &["episodes"]),
+                shown(name, "success_rate", 100.0, 0),
+                shown(name, "median_position_error_mm", 1.0, 1),
+                shown(name, "median_orientation_error_deg", 1.0, 1),
+                shown(name, "median_pushes", 1.0, 1),
+                shown(name, "sim_time_s", 1.0, 0),
+                number_at(p, &["wall_time_s"]),
+            );
+        }
+        if many {
+            println!("over all episodes of all seeds:");
+            for (name, p) in planners {
+                println!(
+                    "{:<12} {:>8} {:>w$.0} {:>w$.1} {:>w$.1} {:>w$.1} {:>w$.0}",
+                    name,
+                    number_at(p, &["episodes"]),
+                    100.0 * number_at(p, &["success_rate"]),
+                    number_at(p, &["median_position_error_mm"]),
+                    number_at(p, &["median_orientation_error_deg"]),
+                    number_at(p, &["median_pushes"]),
+                    number_at(p, &["sim_time_s"]),
+                );
+            }
+        }
+    }
+    if any_oracle {
+        println!("(GT) {ORACLE_NOTE}");
+    }
 }
 
 /// One panel of a plot: a run's recorded poses.

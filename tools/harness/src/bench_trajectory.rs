@@ -1,208 +1,708 @@
-//! `agp bench trajectory`: the paper's push along a path (benchmarks.md section 2), the
-//! affordance and the baseline planner on the same seed.
+//! `agp bench trajectory`: the paper's push along a path (benchmarks.md section 2) on a set
+//! of paths (`task_goals::NamedPath`: a straight line, bends of 45 and 90 deg, an S-curve,
+//! a circle arc), the affordance and the baseline planner on each path over the seeds, the
+//! same seed for both.
+//!
+//! Every figure is built from one-seed documents: a run makes one per seed and merges them
+//! with [`merge`], the function `agp bench merge` calls on the parts of a sharded run, so
+//! the two cannot differ.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::bench_tasks::{
     Overlay, Panel, Runner, judged, physics_label, physics_note, plot_runs, prefix_of, progress,
     resolve_ag, write_json,
 };
+use crate::seeds::{
+    SeedArgs, SeedParts, Shard, Spread, add_seed_fields, finite_or_null, gather, longest_wall_time,
+    number_at, seed_list, spread_at,
+};
 use crate::side_by_side::side_by_side;
+use crate::task_goals::{NamedPath, heading_share, path_length};
 use crate::trajectory_error;
-use agp_planning::{EpisodeConfig, EstimateVerdict, PlannerKind, Task};
-use agp_shared_types::Pose2;
-use agp_world::Scenario;
-use anyhow::{Context, Result};
-use serde::Serialize;
-use std::path::PathBuf;
+use agp_planning::{EpisodeConfig, EpisodeResult, PlannerKind, Task};
+use agp_shared_types::{MAX_PATH_POINTS, Pose2};
+use agp_world::{Scenario, TaskKind};
+use anyhow::{Context, Result, bail};
+use glam::DVec2;
+use serde_json::{Map, Value, json};
+
+/// The planners every trajectory run compares, in report order.
+const PLANNERS: [PlannerKind; 2] = [PlannerKind::Affordance, PlannerKind::Baseline];
+
+/// The heading figure: the share of recorded points whose heading keeps to the path's
+/// tangent within this, deg.
+pub const HEADING_FIGURE_DEG: f64 = 15.0;
 
 /// The options of `agp bench trajectory`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct BenchTrajectoryArgs {
-    /// Built-in scenario or a scenario file; its `path_mm` if it has one, else 300 mm
-    /// along +x then 200 mm at 45 deg.
+    /// Built-in scenario or a scenario file: the object pushed. The paths start at its
+    /// object's start.
     #[arg(long, default_value = "lshape")]
     pub scenario: String,
+    /// Paths to run, comma-separated: `straight` (600 mm along +x, through the centroid,
+    /// the paper's line), `bend45` (300 mm, then 250 mm turned 45 deg left), `bend90` (300
+    /// mm, then 250 mm turned 90 deg right), `s-curve` (500 mm on while moving 200 mm left),
+    /// `arc` (radius 300 mm, 105 deg left), and `scenario` (the scenario's own `path_mm`,
+    /// or its 600 mm line). Default: the five shapes, and `scenario` too when the scenario
+    /// is a trajectory task (which always has its own `path_mm`).
+    #[arg(long, value_delimiter = ',')]
+    pub paths: Vec<NamedPath>,
     /// Affordance gradient file learned from IR (default: `results/learn/<object>.ag`,
     /// learned first with `agp bench learn` when missing).
     #[arg(long)]
     pub ag: Option<PathBuf>,
-    /// Seed of the sensor noise (default: the scenario's).
-    #[arg(long)]
-    pub seed: Option<u64>,
+    #[command(flatten)]
+    pub seeds: SeedArgs,
     /// Step the physics library in-process instead of running the pipeline's processes.
     #[arg(long)]
     pub in_process: bool,
-    /// Also write the result as JSON to this file.
+    /// Also write the result as JSON to this file: per path and planner the mean error
+    /// over the seeds with its spread, the ratio per path and overall, every episode in
+    /// `per_seed`.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Also draw both runs (path, object every few steps, as the paper's Fig. 6) to this
-    /// SVG file.
+    /// Also draw the first seed's runs of both planners, one row per path (the path, the
+    /// object every few steps, as the paper's Fig. 6), to this SVG file.
     #[arg(long)]
     pub plot: Option<PathBuf>,
 }
 
-#[derive(Debug, Serialize)]
-struct TrajectoryPlannerJson {
-    mean_error_mm: f64,
-    points: usize,
-    reached_end: bool,
-    final_distance_to_end_mm: f64,
-    pushes: u32,
-    circlings: u32,
-    sim_time_s: f64,
-    wall_time_s: f64,
-    /// The estimator's estimates of the episode, judged.
-    estimate: Option<EstimateVerdict>,
+impl Default for BenchTrajectoryArgs {
+    fn default() -> Self {
+        Self {
+            scenario: "lshape".into(),
+            paths: Vec::new(),
+            ag: None,
+            seeds: SeedArgs::default(),
+            in_process: false,
+            json: None,
+            plot: None,
+        }
+    }
 }
 
-#[derive(Debug, Serialize)]
-struct TrajectoryJson {
-    benchmark: &'static str,
-    scenario: String,
-    seed: u64,
-    physics: &'static str,
-    path_mm: Vec<[f64; 2]>,
-    planners: BTreeMap<String, TrajectoryPlannerJson>,
-    /// Affordance over baseline.
-    ratio: f64,
-    wall_time_s: f64,
+/// The paths `--paths` names, or the default set (see [`BenchTrajectoryArgs::paths`]),
+/// each once, in the order given.
+fn chosen_paths(args: &BenchTrajectoryArgs, scenario: &Scenario) -> Vec<NamedPath> {
+    let mut chosen = if args.paths.is_empty() {
+        let mut all = NamedPath::SET.to_vec();
+        if scenario.task.kind == TaskKind::Trajectory {
+            all.push(NamedPath::Scenario);
+        }
+        all
+    } else {
+        args.paths.clone()
+    };
+    let mut seen = Vec::new();
+    chosen.retain(|p| {
+        let new = !seen.contains(p);
+        seen.push(*p);
+        new
+    });
+    chosen
 }
 
-/// Runs `agp bench trajectory`: the affordance and the baseline planner on the same
-/// seed.
-pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<serde_json::Value> {
+/// One episode as the JSON holds it.
+fn episode_json(path: &[DVec2], r: &EpisodeResult) -> Value {
+    let e = judged(r);
+    let poses: Vec<Pose2> = e.samples.iter().map(|s| s.pose).collect();
+    let error_mm = trajectory_error(path, &poses).map_or(f64::NAN, |v| v * 1e3);
+    // The L has no symmetry; the heading is the orientation's, as the planner sees it.
+    let heading = heading_share(path, &poses, 1, HEADING_FIGURE_DEG.to_radians());
+    json!({
+        "mean_error_mm": finite_or_null(error_mm),
+        "points": e.samples.len(),
+        "reached_end": r.success(),
+        "end": r.end.name(),
+        "final_distance_to_end_mm": e.position_error_mm,
+        "heading_within_15_deg": heading.map_or(Value::Null, |h| json!(h)),
+        "pushes": r.pushes,
+        "circlings": r.circlings,
+        "sim_time_s": r.sim_time_s,
+        "wall_time_s": r.wall_time_s,
+        "estimate": r.estimate_verdict,
+    })
+}
+
+/// What must be alike in every seed of one run.
+fn trajectory_signature(doc: &Value) -> Value {
+    let paths: Map<String, Value> = doc["paths"]
+        .as_object()
+        .map(|m| {
+            m.iter()
+                .map(|(k, p)| {
+                    let planners: Vec<String> = p["planners"]
+                        .as_object()
+                        .map(|q| q.keys().cloned().collect())
+                        .unwrap_or_default();
+                    (
+                        k.clone(),
+                        json!({"path_mm": p["path_mm"], "planners": planners}),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    json!({
+        "scenario": doc["scenario"],
+        "physics": doc["physics"],
+        "paths": paths,
+    })
+}
+
+/// The mean of the finite `values`; NaN when none is.
+fn mean_of(values: &[f64]) -> f64 {
+    Spread::of(values).map_or(f64::NAN, |s| s.mean)
+}
+
+/// The trajectory document of `parts`: per path and planner the mean error over the seeds
+/// with its spread and the ratio; per planner the mean over every path and seed and the
+/// overall ratio; `seeds`, `per_seed` (and `shard`). Its `wall_time_s` is the longest
+/// seed's; the caller sets the run's own.
+fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let first = docs[0];
+    let names: Vec<String> = first["paths"]
+        .as_object()
+        .map(|m| m.keys().cloned().collect())
+        .unwrap_or_default();
+    let planners: Vec<String> = first["planners"]
+        .as_object()
+        .map(|m| m.keys().cloned().collect())
+        .unwrap_or_default();
+    let mut paths = Map::new();
+    for name in &names {
+        let def = &first["paths"][name];
+        let mut per_planner = Map::new();
+        for p in &planners {
+            let at = |key: &str| -> Vec<f64> {
+                docs.iter()
+                    .map(|d| number_at(d, &["paths", name, "planners", p, key]))
+                    .collect()
+            };
+            let reached: Vec<f64> = docs
+                .iter()
+                .map(|d| {
+                    if d["paths"][name]["planners"][p]["reached_end"] == true {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            per_planner.insert(
+                p.clone(),
+                json!({
+                    "mean_error_mm": finite_or_null(mean_of(&at("mean_error_mm"))),
+                    "spread": spread_at(docs.iter().copied(), &["paths", name, "planners", p, "mean_error_mm"]),
+                    "reached_end_rate": mean_of(&reached),
+                    "heading_within_15_deg": finite_or_null(mean_of(&at("heading_within_15_deg"))),
+                    "pushes": finite_or_null(mean_of(&at("pushes"))),
+                }),
+            );
+        }
+        let ratio = number_at(
+            &Value::Object(per_planner.clone()),
+            &["affordance", "mean_error_mm"],
+        ) / number_at(
+            &Value::Object(per_planner.clone()),
+            &["baseline", "mean_error_mm"],
+        );
+        paths.insert(
+            name.clone(),
+            json!({
+                "path_mm": def["path_mm"],
+                "length_mm": def["length_mm"],
+                "planners": per_planner,
+                "ratio": finite_or_null(ratio),
+            }),
+        );
+    }
+    let mut overall = Map::new();
+    for p in &planners {
+        let per_seed: Vec<f64> = docs
+            .iter()
+            .map(|d| number_at(d, &["planners", p, "mean_error_mm"]))
+            .collect();
+        overall.insert(
+            p.clone(),
+            json!({
+                "mean_error_mm": finite_or_null(mean_of(&per_seed)),
+                "spread": spread_at(docs.iter().copied(), &["planners", p, "mean_error_mm"]),
+            }),
+        );
+    }
+    let overall_value = Value::Object(overall.clone());
+    let ratio = number_at(&overall_value, &["affordance", "mean_error_mm"])
+        / number_at(&overall_value, &["baseline", "mean_error_mm"]);
+    let mut doc = Map::new();
+    doc.insert("benchmark".into(), json!("trajectory"));
+    doc.insert("scenario".into(), first["scenario"].clone());
+    doc.insert("seed".into(), first["seed"].clone());
+    doc.insert("physics".into(), first["physics"].clone());
+    doc.insert("planners".into(), overall_value);
+    doc.insert("ratio".into(), finite_or_null(ratio));
+    doc.insert("paths".into(), Value::Object(paths));
+    add_seed_fields(&mut doc, parts, shard);
+    let wall = docs
+        .iter()
+        .map(|d| number_at(d, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    doc.insert("wall_time_s".into(), json!(wall));
+    Value::Object(doc)
+}
+
+/// Merges trajectory documents of disjoint seed sets (whole runs, shards' parts, one-seed
+/// documents) into the document one run over all their seeds writes, but for
+/// `wall_time_s`: the longest part's.
+pub fn merge(parts: &[Value]) -> Result<Value> {
+    let gathered = gather(parts, "trajectory", trajectory_signature).map_err(anyhow::Error::new)?;
+    let mut doc = assemble(&gathered, None);
+    doc["wall_time_s"] = json!(longest_wall_time(parts));
+    Ok(doc)
+}
+
+/// The human table of a trajectory document: per path each planner's mean error, mean
+/// (min-max) over the seeds, and the ratio; then the overall figures.
+pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
+    let own: Vec<u64> = doc["per_seed"]
+        .as_array()
+        .map(|a| a.iter().filter_map(|d| d["seed"].as_u64()).collect())
+        .unwrap_or_default();
+    let seeds: Vec<u64> = doc["seeds"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_u64).collect())
+        .unwrap_or_default();
+    println!(
+        "trajectory `{}`: {} {}{}; {note}",
+        doc["scenario"].as_str().unwrap_or("?"),
+        if own.len() == 1 { "seed" } else { "seeds" },
+        seed_list(&own),
+        doc["shard"]
+            .as_str()
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
+            .unwrap_or_default(),
+    );
+    println!(
+        "mean distance of the centroid to the path per recorded point, mm{}; ends reached",
+        if own.len() > 1 {
+            ": mean (min-max) over the seeds"
+        } else {
+            ""
+        }
+    );
+    let w = if own.len() > 1 { 20 } else { 10 };
+    println!(
+        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6}",
+        "path", "length", "affordance", "ends", "baseline", "ends", "ratio"
+    );
+    let cell = |p: &Value| -> String {
+        serde_json::from_value::<Spread>(p["spread"].clone())
+            .map_or_else(|_| "-".to_owned(), |s| s.show(2))
+    };
+    for name in order {
+        let path = &doc["paths"][name];
+        let a = &path["planners"]["affordance"];
+        let b = &path["planners"]["baseline"];
+        println!(
+            "{:<10} {:>5.0} mm {:>w$} {:>5.0}% {:>w$} {:>5.0}% {:>6.2}",
+            name,
+            number_at(path, &["length_mm"]),
+            cell(a),
+            100.0 * number_at(a, &["reached_end_rate"]),
+            cell(b),
+            100.0 * number_at(b, &["reached_end_rate"]),
+            number_at(path, &["ratio"]),
+        );
+    }
+    println!(
+        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6.2}",
+        "overall",
+        "",
+        cell(&doc["planners"]["affordance"]),
+        "",
+        cell(&doc["planners"]["baseline"]),
+        "",
+        number_at(doc, &["ratio"]),
+    );
+    println!("ratio affordance / baseline (paper, one straight line: 7.82 / 10.71 = 0.73)");
+}
+
+/// Runs `agp bench trajectory`: both planners on every chosen path over the seeds.
+pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
     let wall = Instant::now();
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
-    let planners = [PlannerKind::Affordance, PlannerKind::Baseline];
-    let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &planners)?;
+    let chosen = chosen_paths(args, &scenario);
+    let paths: Vec<(NamedPath, Vec<DVec2>)> =
+        chosen.iter().map(|&p| (p, p.points(&scenario))).collect();
+    for (name, points) in &paths {
+        if !(2..=MAX_PATH_POINTS).contains(&points.len()) {
+            bail!(
+                "path `{name}` has {} points; a trajectory takes 2 to {MAX_PATH_POINTS}",
+                points.len()
+            );
+        }
+    }
+    let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &PLANNERS)?;
     let note = physics_note(args.in_process);
-    let seed = args.seed.unwrap_or(scenario.task.seed);
-    let path = scenario.task.path.clone();
-    let config = EpisodeConfig {
-        seed,
-        ..EpisodeConfig::for_task(&scenario.task)
-    };
+    let all_seeds = args.seeds.all();
+    let seeds = args.seeds.mine();
+    let base = EpisodeConfig::for_task(&scenario.task);
     eprintln!(
-        "bench trajectory: scenario `{}`, seed {seed}; {note}",
-        scenario.name
+        "bench trajectory: scenario `{}`, paths {}, seeds {}{}; {note}",
+        scenario.name,
+        chosen
+            .iter()
+            .map(|p| p.name())
+            .collect::<Vec<_>>()
+            .join(", "),
+        seed_list(&seeds),
+        args.seeds
+            .shard
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
+            .unwrap_or_default()
     );
-    let bar = progress(planners.len() as u64);
-    bar.set_prefix(prefix_of(&planners));
-    let task = Task::Trajectory { path: path.clone() };
-    let runs = side_by_side(&planners, |&planner| {
-        let mut runner = Runner::start(
+
+    let work: Vec<(u64, PlannerKind)> = seeds
+        .iter()
+        .flat_map(|&seed| PLANNERS.iter().map(move |&p| (seed, p)))
+        .collect();
+    let bar = progress((paths.len() * work.len()) as u64);
+    bar.set_prefix(prefix_of(&PLANNERS));
+    // Two pipelines of one planner may run at once when seeds run side by side: the seed
+    // tells their instances apart.
+    let tag = |planner: PlannerKind, seed: u64| {
+        let short = planner.name().get(..3).unwrap_or(planner.name());
+        if seeds.len() > 1 {
+            format!("{short}{seed}")
+        } else {
+            short.to_owned()
+        }
+    };
+    let runs = side_by_side(&work, |&(seed, planner)| {
+        let started = Instant::now();
+        let mut runner = Runner::start_tagged(
             args.in_process,
             &args.scenario,
             &scenario,
             ag.as_deref(),
             planner,
             seed,
+            &tag(planner, seed),
         )?;
-        let r = runner
-            .episode(planner, &task, &config)
-            .with_context(|| format!("planner `{planner}`"));
+        let mut runs = Vec::with_capacity(paths.len());
+        let episodes = (|| -> Result<()> {
+            for (name, points) in &paths {
+                // Each path's episode draws the seed's noise afresh, the same for both
+                // planners.
+                let config = EpisodeConfig {
+                    seed,
+                    ..base.clone()
+                };
+                let task = Task::Trajectory {
+                    path: points.clone(),
+                };
+                let r = runner
+                    .episode(planner, &task, &config)
+                    .with_context(|| format!("planner `{planner}`, seed {seed}, path `{name}`"))?;
+                runs.push(r);
+                bar.inc(1);
+            }
+            Ok(())
+        })();
         // Stopped and cleaned up whatever happened: a failed episode leaves no file.
         let finished = runner.finish();
-        let r = r?;
+        episodes?;
         finished?;
-        bar.inc(1);
-        Ok(r)
+        Ok((runs, started.elapsed().as_secs_f64()))
     })
     .into_iter()
     .collect::<Result<Vec<_>>>()?;
     bar.finish_and_clear();
-    let wall_time_s = wall.elapsed().as_secs_f64();
 
-    let errors: Vec<f64> = runs
-        .iter()
-        .map(|r| {
-            let poses: Vec<Pose2> = judged(r).samples.iter().map(|s| s.pose).collect();
-            trajectory_error(&path, &poses).unwrap_or(f64::NAN) * 1e3
-        })
-        .collect();
-    let ratio = errors[0] / errors[1];
-    println!(
-        "trajectory `{}`: seed {seed}, path {} mm; {note}",
-        scenario.name,
-        path.iter()
-            .map(|p| format!("({:.0}, {:.0})", p.x * 1e3, p.y * 1e3))
-            .collect::<Vec<_>>()
-            .join(" -> ")
-    );
-    println!(
-        "{:<12} {:>14} {:>8} {:>10} {:>8} {:>10} {:>8} {:>8}",
-        "planner", "mean err mm", "points", "end", "pushes", "circlings", "sim s", "wall s"
-    );
-    let mut json_planners = BTreeMap::new();
-    for ((planner, r), e) in planners.iter().zip(&runs).zip(&errors) {
-        println!(
-            "{:<12} {:>14.2} {:>8} {:>10} {:>8} {:>10} {:>8.0} {:>8.1}",
-            planner.name(),
-            e,
-            judged(r).samples.len(),
-            if r.success() { "reached" } else { r.end.name() },
-            r.pushes,
-            r.circlings,
-            r.sim_time_s,
-            r.wall_time_s
-        );
-        json_planners.insert(
-            planner.name().to_owned(),
-            TrajectoryPlannerJson {
-                mean_error_mm: *e,
-                points: judged(r).samples.len(),
-                reached_end: r.success(),
-                final_distance_to_end_mm: judged(r).position_error_mm,
-                pushes: r.pushes,
-                circlings: r.circlings,
-                sim_time_s: r.sim_time_s,
-                wall_time_s: r.wall_time_s,
-                estimate: r.estimate_verdict,
-            },
-        );
+    let mut docs = Vec::with_capacity(seeds.len());
+    let mut first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
+    let mut runs = runs.into_iter();
+    for &seed in &seeds {
+        let mut per_path: Vec<Map<String, Value>> = vec![Map::new(); paths.len()];
+        let mut wall_s: f64 = 0.0;
+        for &planner in &PLANNERS {
+            let (results, planner_wall_s) = runs
+                .next()
+                .context("a (seed, planner) pair without its episodes")?;
+            wall_s = wall_s.max(planner_wall_s);
+            for ((slot, (_, points)), r) in per_path.iter_mut().zip(&paths).zip(&results) {
+                slot.insert(planner.name().to_owned(), episode_json(points, r));
+            }
+            if seed == seeds[0] {
+                first_seed_runs.insert(planner, results);
+            }
+        }
+        docs.push(one_seed_doc(
+            &scenario.name,
+            seed,
+            args.in_process,
+            &paths,
+            per_path,
+            wall_s,
+        ));
     }
-    println!("ratio affordance / baseline {ratio:.2} (paper 7.82 / 10.71 = 0.73)");
+    let parts = gather(&docs, "trajectory", trajectory_signature).map_err(anyhow::Error::new)?;
+    let parts = SeedParts {
+        seeds: all_seeds,
+        ..parts
+    };
+    let mut doc = assemble(&parts, args.seeds.shard);
+    let wall_time_s = wall.elapsed().as_secs_f64();
+    doc["wall_time_s"] = json!(wall_time_s);
+    let order: Vec<String> = chosen.iter().map(|p| p.name().to_owned()).collect();
+    print_trajectory(&doc, &order, note);
     println!("wall time {wall_time_s:.1} s");
-    let doc = serde_json::to_value(TrajectoryJson {
-        benchmark: "trajectory",
-        scenario: scenario.name.clone(),
-        seed,
-        physics: physics_label(args.in_process),
-        path_mm: path.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect(),
-        planners: json_planners,
-        ratio,
-        wall_time_s,
-    })
-    .context("cannot encode the result")?;
     if let Some(file) = &args.json {
         write_json(file, &doc)?;
         println!("JSON     {}", file.display());
     }
     if let Some(file) = &args.plot {
-        let panels: Vec<Panel> = planners
-            .iter()
-            .zip(&runs)
-            .zip(&errors)
-            .map(|((planner, r), e)| Panel {
-                title: format!("{planner}: mean error {e:.2} mm per point"),
-                samples: &judged(r).samples,
-            })
-            .collect();
-        let title = format!(
-            "trajectory `{}`: path in red, object every few steps ({note})",
-            scenario.name
-        );
-        plot_runs(
-            file,
-            &title,
-            &scenario.object.shape,
-            &panels,
-            Overlay::Path(&path),
-        )?;
+        plot_paths(file, &scenario, &paths, &first_seed_runs, seeds[0], note)?;
         println!("plot     {}", file.display());
     }
     Ok(doc)
+}
+
+/// The document of one seed: per path both planners' episodes and the ratio; per planner
+/// the mean error over the paths.
+fn one_seed_doc(
+    scenario: &str,
+    seed: u64,
+    in_process: bool,
+    paths: &[(NamedPath, Vec<DVec2>)],
+    per_path: Vec<Map<String, Value>>,
+    wall_s: f64,
+) -> Value {
+    let mut paths_json = Map::new();
+    for ((name, points), planners) in paths.iter().zip(per_path) {
+        let planners = Value::Object(planners);
+        let ratio = number_at(&planners, &["affordance", "mean_error_mm"])
+            / number_at(&planners, &["baseline", "mean_error_mm"]);
+        paths_json.insert(
+            name.name().to_owned(),
+            json!({
+                "path_mm": points.iter().map(|p| [p.x * 1e3, p.y * 1e3]).collect::<Vec<_>>(),
+                "length_mm": path_length(points) * 1e3,
+                "planners": planners,
+                "ratio": finite_or_null(ratio),
+            }),
+        );
+    }
+    let paths_value = Value::Object(paths_json);
+    let mut planners = Map::new();
+    for planner in PLANNERS {
+        let errors: Vec<f64> = paths
+            .iter()
+            .map(|(name, _)| {
+                number_at(
+                    &paths_value,
+                    &[name.name(), "planners", planner.name(), "mean_error_mm"],
+                )
+            })
+            .collect();
+        planners.insert(
+            planner.name().to_owned(),
+            json!({ "mean_error_mm": finite_or_null(mean_of(&errors)) }),
+        );
+    }
+    let planners = Value::Object(planners);
+    let ratio = number_at(&planners, &["affordance", "mean_error_mm"])
+        / number_at(&planners, &["baseline", "mean_error_mm"]);
+    json!({
+        "benchmark": "trajectory",
+        "scenario": scenario,
+        "seed": seed,
+        "physics": physics_label(in_process),
+        "planners": planners,
+        "ratio": finite_or_null(ratio),
+        "paths": paths_value,
+        "wall_time_s": wall_s,
+    })
+}
+
+/// One SVG with a row per path, each row both planners' runs of `seed` side by side.
+fn plot_paths(
+    file: &Path,
+    scenario: &Scenario,
+    paths: &[(NamedPath, Vec<DVec2>)],
+    runs: &BTreeMap<PlannerKind, Vec<EpisodeResult>>,
+    seed: u64,
+    note: &str,
+) -> Result<()> {
+    let dir = tempfile::tempdir().context("cannot create a folder for the plot's rows")?;
+    let mut rows = Vec::with_capacity(paths.len());
+    for (k, (name, points)) in paths.iter().enumerate() {
+        let panels: Vec<Panel> = runs
+            .iter()
+            .filter_map(|(planner, results)| {
+                let r = results.get(k)?;
+                let poses: Vec<Pose2> = judged(r).samples.iter().map(|s| s.pose).collect();
+                let e = trajectory_error(points, &poses).map_or(f64::NAN, |v| v * 1e3);
+                Some(Panel {
+                    title: format!("{planner}: mean error {e:.2} mm per point"),
+                    samples: &judged(r).samples,
+                })
+            })
+            .collect();
+        let row = dir.path().join(format!("row-{k}.svg"));
+        let title = format!(
+            "trajectory `{}`, path `{name}`, seed {seed}: path in red, object every few steps ({note})",
+            scenario.name
+        );
+        plot_runs(
+            &row,
+            &title,
+            &scenario.object.shape,
+            &panels,
+            Overlay::Path(points),
+        )?;
+        rows.push(
+            std::fs::read_to_string(&row)
+                .with_context(|| format!("cannot read the plot's row `{}`", row.display()))?,
+        );
+    }
+    let svg = stack_rows(&rows)?;
+    std::fs::write(file, svg).with_context(|| format!("cannot write `{}`", file.display()))
+}
+
+/// SVG documents stacked top to bottom into one.
+fn stack_rows(rows: &[String]) -> Result<String> {
+    let size = |svg: &str, key: &str| -> Option<f64> {
+        let head = &svg[svg.find("<svg")?..];
+        let head = &head[..head.find('>')?];
+        let at = head.find(&format!(" {key}=\""))? + key.len() + 3;
+        head[at..].split('"').next()?.parse().ok()
+    };
+    let mut body = String::new();
+    let (mut width, mut y) = (0.0f64, 0.0f64);
+    for row in rows {
+        let (Some(w), Some(h)) = (size(row, "width"), size(row, "height")) else {
+            bail!("cannot stack the plot's rows: a row without its size");
+        };
+        let start = row.find("<svg").unwrap_or(0);
+        body.push_str(&format!(
+            "<g transform=\"translate(0,{y})\">\n{}\n</g>\n",
+            &row[start..]
+        ));
+        width = width.max(w);
+        y += h;
+    }
+    Ok(format!(
+        "<svg width=\"{width}\" height=\"{y}\" viewBox=\"0 0 {width} {y}\" xmlns=\"http://www.w3.org/2000/svg\">\n{body}</svg>\n"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-seed document as a run writes it, with made-up errors.
+    fn doc_of(seed: u64, errors: &[(&str, f64, f64)]) -> Value {
+        let scenario = Scenario::builtin("lshape").expect("built-in");
+        let paths: Vec<(NamedPath, Vec<DVec2>)> = errors
+            .iter()
+            .map(|(n, _, _)| {
+                let p: NamedPath = n.parse().expect("a path name");
+                (p, p.points(&scenario))
+            })
+            .collect();
+        let per_path = errors
+            .iter()
+            .map(|(_, a, b)| {
+                let mut m = Map::new();
+                m.insert(
+                    "affordance".into(),
+                    json!({"mean_error_mm": a, "reached_end": true}),
+                );
+                m.insert(
+                    "baseline".into(),
+                    json!({"mean_error_mm": b, "reached_end": false}),
+                );
+                m
+            })
+            .collect();
+        one_seed_doc("lshape", seed, false, &paths, per_path, 1.0)
+    }
+
+    #[test]
+    fn a_merge_of_one_seed_documents_is_the_run_over_their_union() {
+        let a = doc_of(100, &[("straight", 1.0, 2.0), ("bend90", 3.0, 5.0)]);
+        let b = doc_of(101, &[("straight", 2.0, 4.0), ("bend90", 5.0, 5.0)]);
+        let c = doc_of(102, &[("straight", 3.0, 3.0), ("bend90", 1.0, 2.0)]);
+        let whole = merge(&[a.clone(), b.clone(), c.clone()]).expect("merge");
+        // Merged in any grouping, the same document.
+        let ab = merge(&[b.clone(), a.clone()]).expect("merge");
+        assert_eq!(merge(&[ab, c]).expect("merge"), whole);
+        assert_eq!(whole["seeds"], json!([100, 101, 102]));
+        assert_eq!(whole["seed"], json!(100));
+        // straight: affordance 2, baseline 3; bend90: 3 and 4; overall 2.5 and 3.5.
+        let at = |p: &[&str]| number_at(&whole, p);
+        assert!(
+            (at(&[
+                "paths",
+                "straight",
+                "planners",
+                "affordance",
+                "mean_error_mm"
+            ]) - 2.0)
+                .abs()
+                < 1e-12
+        );
+        assert!((at(&["paths", "bend90", "ratio"]) - 0.75).abs() < 1e-12);
+        assert!((at(&["planners", "affordance", "mean_error_mm"]) - 2.5).abs() < 1e-12);
+        assert!((at(&["ratio"]) - 2.5 / 3.5).abs() < 1e-12);
+        assert_eq!(
+            at(&[
+                "paths",
+                "bend90",
+                "planners",
+                "affordance",
+                "reached_end_rate"
+            ]),
+            1.0
+        );
+        assert_eq!(
+            at(&[
+                "paths",
+                "bend90",
+                "planners",
+                "baseline",
+                "reached_end_rate"
+            ]),
+            0.0
+        );
+    }
+
+    #[test]
+    fn a_merge_refuses_a_seed_twice_and_a_part_of_other_paths() {
+        let a = doc_of(100, &[("straight", 1.0, 2.0)]);
+        assert!(merge(&[a.clone(), a.clone()]).is_err());
+        let other = doc_of(101, &[("arc", 1.0, 2.0)]);
+        assert!(merge(&[a, other]).is_err());
+    }
+
+    #[test]
+    fn stacked_rows_keep_each_row_below_the_last() {
+        let row = |w: u32, h: u32| {
+            format!(
+                "<?xml version=\"1.0\"?>\n<svg width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\"><rect/></svg>\n"
+            )
+        };
+        let svg = stack_rows(&[row(100, 50), row(80, 30)]).expect("stacked");
+        assert!(svg.starts_with("<svg width=\"100\" height=\"80\""), "{svg}");
+        assert!(svg.contains("translate(0,50)"), "{svg}");
+        assert!(!svg.contains("<?xml"), "{svg}");
+    }
 }

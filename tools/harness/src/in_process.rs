@@ -21,6 +21,8 @@ pub struct InProcessWorld {
     tracker: ObjectTracker,
     /// The tracker's estimate of the latest frame.
     estimate: ObjectEstimate,
+    /// The tracker's gradient generation the planner has (online learning).
+    served_generation: u64,
 }
 
 impl InProcessWorld {
@@ -31,14 +33,27 @@ impl InProcessWorld {
         robot: &RobotDescription,
         ag: Option<&AffordanceGradient>,
     ) -> Result<Self, TrackerError> {
-        let mut tracker = ObjectTracker::new(robot, TrackerConfig::default());
+        Self::with_tracker(sim, robot, ag, TrackerConfig::default())
+    }
+
+    /// [`InProcessWorld::new`] with a tracker of `config` (e.g. online learning on: the
+    /// planner then gets each gradient the tracker learns, between two pushes).
+    pub fn with_tracker(
+        sim: Sim,
+        robot: &RobotDescription,
+        ag: Option<&AffordanceGradient>,
+        config: TrackerConfig,
+    ) -> Result<Self, TrackerError> {
+        let mut tracker = ObjectTracker::try_new(robot, config)?;
         if let Some(ag) = ag {
             tracker.set_gradient(ag)?;
         }
+        let served_generation = tracker.gradient_generation();
         let mut world = Self {
             sim,
             tracker,
             estimate: ObjectEstimate::default(),
+            served_generation,
         };
         world.perceive();
         Ok(world)
@@ -64,6 +79,23 @@ impl InProcessWorld {
     /// The simulation, to move things by hand (tests).
     pub fn sim_mut(&mut self) -> &mut Sim {
         &mut self.sim
+    }
+
+    /// The estimator's perception (its gradient, as learned on online).
+    pub fn tracker(&self) -> &ObjectTracker {
+        &self.tracker
+    }
+
+    /// The world is put back for a new episode: the object and the robot at the given
+    /// poses, the tracker forgetting the object (as the estimator does at a reset) but
+    /// keeping its gradient, as learned on: the next episode starts with it (take it
+    /// from [`InProcessWorld::tracker`]), and [`World::newer_gradient`] offers only what
+    /// is learned from here on.
+    pub fn reset(&mut self, object: Pose, robot: Pose) {
+        self.sim.reset(object, robot);
+        self.tracker.reset();
+        self.served_generation = self.tracker.gradient_generation();
+        self.perceive();
     }
 }
 
@@ -104,6 +136,15 @@ impl World for InProcessWorld {
 
     fn object_truth(&self) -> Option<Pose> {
         Some(self.sim.object_pose())
+    }
+
+    fn newer_gradient(&mut self) -> Option<AffordanceGradient> {
+        let generation = self.tracker.gradient_generation();
+        if generation == self.served_generation {
+            return None;
+        }
+        self.served_generation = generation;
+        self.tracker.gradient().cloned()
     }
 }
 

@@ -1,6 +1,7 @@
 //! The harness: everything that runs the system to measure or judge it, and never runs
 //! inside the pipeline. The benchmarks of `agp bench` (`bench_learn`, `bench_tasks`,
-//! `bench_paper`, over private pipelines of real processes by `pipeline_bench` or in
+//! `bench_paper`, and `bench_merge`, which merges the parts of a run split into shards;
+//! over private pipelines of real processes by `pipeline_bench` or in
 //! process by `in_process`), the judge that scores a task by ground truth (`evaluation`),
 //! `agp probe` (`probe`), the learning benchmark against the physics library
 //! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
@@ -9,7 +10,9 @@
 //!
 //! Ground truth is read here and in the physics library only (and by the `oracle`).
 
+pub mod bench_adapt;
 pub mod bench_learn;
+pub mod bench_merge;
 pub mod bench_paper;
 pub mod bench_tasks;
 pub mod bench_trajectory;

@@ -156,8 +156,9 @@ impl PipelineBench {
                     goal.theta.to_degrees()
                 ));
             }
-            Task::Trajectory { .. } => {
-                cmd.args(["--mode", "trajectory"]);
+            Task::Trajectory { path } => {
+                cmd.args(["--mode", "trajectory", "--path"])
+                    .args(path.iter().map(|p| format!("{},{}", p.x * 1e3, p.y * 1e3)));
             }
         }
         let wall = Instant::now();

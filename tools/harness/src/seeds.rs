@@ -1,5 +1,5 @@
-//! Which seeds a benchmark runs, which of them this shard runs, and the spread of a figure
-//! over them.
+//! Which seeds a benchmark runs, which of them this shard runs, the spread of a figure
+//! over them, and the parts of a run gathered for a merge ([`gather`]).
 //!
 //! Seeds 1 to 10 are the tuning seeds: every constant of the planners and the learner was
 //! chosen on them. Reported figures use seeds from [`FIRST_REPORTED_SEED`] on, which no
@@ -9,6 +9,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value, json};
 
 /// The first seed of the reported figures: nothing was tuned on it or after it.
 pub const FIRST_REPORTED_SEED: u64 = 100;
@@ -185,6 +186,271 @@ fn student_t95(dof: usize) -> f64 {
     }
 }
 
+/// A part a merge refuses, in one line: which part (its index among the parts given; none
+/// when the fault is of the parts together) and what is wrong. `agp bench merge` puts the
+/// part's file name in its place.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}{what}", part.map(|p| format!("part {}: ", p + 1)).unwrap_or_default())]
+pub struct MergePartError {
+    /// Index of the faulty part in the parts given.
+    pub part: Option<usize>,
+    /// What is wrong, lowercase, no trailing period.
+    pub what: String,
+}
+
+impl MergePartError {
+    fn of(part: usize, what: String) -> Self {
+        Self {
+            part: Some(part),
+            what,
+        }
+    }
+}
+
+/// The parts of one run, checked: every seed of the run, and each seed's document in seed
+/// order with the part it came from.
+#[derive(Debug, Clone)]
+pub struct SeedParts {
+    /// Every seed of the run, ascending.
+    pub seeds: Vec<u64>,
+    /// (seed, index of its part, its one-seed document), ascending by seed.
+    pub per_seed: Vec<(u64, usize, Value)>,
+}
+
+impl SeedParts {
+    /// The one-seed documents, in seed order.
+    pub fn docs(&self) -> impl Iterator<Item = &Value> {
+        self.per_seed.iter().map(|(_, _, d)| d)
+    }
+}
+
+/// The seed list a document names: `seeds`, else its one `seed`.
+fn declared_seeds(doc: &Value) -> Option<Vec<u64>> {
+    match doc.get("seeds") {
+        Some(list) => list.as_array()?.iter().map(Value::as_u64).collect(),
+        None => doc.get("seed").and_then(Value::as_u64).map(|s| vec![s]),
+    }
+}
+
+/// Gathers the parts of one run of `benchmark` for a merge: documents of disjoint seed
+/// sets, each a whole run, a shard's partial run (`shard`, `seeds` of the whole run,
+/// `per_seed` its own) or a one-seed document without `per_seed`. Refuses a part of
+/// another benchmark, a part whose `signature` (what must be alike in every seed of one
+/// run: scenario, planners, episodes..., computed on each one-seed document) differs from
+/// the first's, a seed twice, and, when any part is a shard, parts of different runs
+/// (another seed list) or a seed of the run that no part holds.
+pub fn gather(
+    parts: &[Value],
+    benchmark: &str,
+    signature: impl Fn(&Value) -> Value,
+) -> Result<SeedParts, MergePartError> {
+    if parts.is_empty() {
+        return Err(MergePartError {
+            part: None,
+            what: "no part to merge".into(),
+        });
+    }
+    let mut per_seed: Vec<(u64, usize, Value)> = Vec::new();
+    let mut run_seeds: Option<(usize, Vec<u64>)> = None;
+    let mut any_shard = false;
+    let mut first_signature: Option<Value> = None;
+    for (i, part) in parts.iter().enumerate() {
+        let kind = part.get("benchmark").and_then(Value::as_str);
+        if kind != Some(benchmark) {
+            return Err(MergePartError::of(
+                i,
+                match kind {
+                    Some(k) => format!("a `{k}` result, not `{benchmark}`"),
+                    None => format!(
+                        "not a benchmark result (no `benchmark` field; `{benchmark}` expected)"
+                    ),
+                },
+            ));
+        }
+        let declared = declared_seeds(part)
+            .ok_or_else(|| MergePartError::of(i, "no `seeds` list or `seed`".into()))?;
+        let shard = match part.get("shard") {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(
+                v.as_str()
+                    .and_then(|s| s.parse::<Shard>().ok())
+                    .ok_or_else(|| MergePartError::of(i, format!("`shard` {v} is not I/N")))?,
+            ),
+        };
+        any_shard |= shard.is_some();
+        let own: Vec<Value> = match part.get("per_seed") {
+            Some(list) => list
+                .as_array()
+                .ok_or_else(|| MergePartError::of(i, "`per_seed` is not a list".into()))?
+                .clone(),
+            None => vec![part.clone()],
+        };
+        if own.is_empty() {
+            return Err(MergePartError::of(i, "`per_seed` is empty".into()));
+        }
+        match &run_seeds {
+            Some((_, seeds)) if shard.is_some() && *seeds != declared => {
+                return Err(MergePartError::of(
+                    i,
+                    format!(
+                        "a part of another run: seeds {}, not {} as the other parts",
+                        seed_list(&declared),
+                        seed_list(seeds)
+                    ),
+                ));
+            }
+            None if shard.is_some() => run_seeds = Some((i, declared.clone())),
+            _ => {}
+        }
+        for doc in own {
+            let seed = doc.get("seed").and_then(Value::as_u64).ok_or_else(|| {
+                MergePartError::of(i, "an entry of `per_seed` has no `seed`".into())
+            })?;
+            if !declared.contains(&seed) {
+                return Err(MergePartError::of(
+                    i,
+                    format!(
+                        "seed {seed} is not among its run's seeds {}",
+                        seed_list(&declared)
+                    ),
+                ));
+            }
+            let sig = signature(&doc);
+            match &first_signature {
+                None => first_signature = Some(sig),
+                Some(first) if *first != sig => {
+                    return Err(MergePartError::of(
+                        i,
+                        format!(
+                            "seed {seed} is of another run than the first part's seeds: {}",
+                            differences(&sig, first)
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+            if let Some((_, other, _)) = per_seed.iter().find(|(s, _, _)| *s == seed) {
+                let other = *other;
+                return Err(MergePartError::of(
+                    i,
+                    if other == i {
+                        format!("seed {seed} is there twice")
+                    } else {
+                        format!("seed {seed} is also in part {}", other + 1)
+                    },
+                ));
+            }
+            per_seed.push((seed, i, doc));
+        }
+    }
+    per_seed.sort_by_key(|(s, _, _)| *s);
+    let mut seeds: Vec<u64> = per_seed.iter().map(|(s, _, _)| *s).collect();
+    if any_shard {
+        let (_, mut declared) = run_seeds.unwrap_or_default();
+        declared.sort_unstable();
+        // A one-seed part beside shards must be of the same run.
+        if let Some(&(s, i, _)) = per_seed.iter().find(|(s, _, _)| !declared.contains(s)) {
+            return Err(MergePartError::of(
+                i,
+                format!(
+                    "seed {s} is not among the run's seeds {}",
+                    seed_list(&declared)
+                ),
+            ));
+        }
+        if let Some(missing) = declared.iter().find(|s| !seeds.contains(s)) {
+            return Err(MergePartError {
+                part: None,
+                what: format!(
+                    "seed {missing} of the run (seeds {}) is in no part: a shard is missing",
+                    seed_list(&declared)
+                ),
+            });
+        }
+        seeds = declared;
+    }
+    Ok(SeedParts { seeds, per_seed })
+}
+
+/// What differs between two signatures: "`scenario` is \"lshape\", not \"triangle\"", for
+/// each differing key of two objects.
+fn differences(sig: &Value, first: &Value) -> String {
+    match (sig.as_object(), first.as_object()) {
+        (Some(a), Some(b)) => a
+            .iter()
+            .filter(|(k, v)| b.get(*k) != Some(*v))
+            .map(|(k, v)| {
+                format!(
+                    "`{k}` is {v}, not {}",
+                    b.get(k)
+                        .map_or_else(|| "absent".to_owned(), Value::to_string)
+                )
+            })
+            .chain(
+                b.keys()
+                    .filter(|k| !a.contains_key(*k))
+                    .map(|k| format!("`{k}` is absent")),
+            )
+            .collect::<Vec<_>>()
+            .join("; "),
+        _ => format!("{sig}, not {first}"),
+    }
+}
+
+/// `100-104`, or `100, 102` when not a run of consecutive seeds.
+pub fn seed_list(seeds: &[u64]) -> String {
+    let consecutive = seeds.windows(2).all(|w| w[1] == w[0].wrapping_add(1));
+    match (seeds.first(), seeds.last()) {
+        (Some(a), Some(b)) if seeds.len() > 2 && consecutive => format!("{a}-{b}"),
+        _ => seeds
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// The number at `path` in `doc`; NaN when absent or null (a figure a seed had none of).
+pub fn number_at(doc: &Value, path: &[&str]) -> f64 {
+    path.iter()
+        .try_fold(doc, |v, k| v.get(*k))
+        .and_then(Value::as_f64)
+        .unwrap_or(f64::NAN)
+}
+
+/// The [`Spread`] of a figure over the seeds' documents, as JSON (null when no seed has it).
+pub fn spread_at<'a>(docs: impl IntoIterator<Item = &'a Value>, path: &[&str]) -> Value {
+    let values: Vec<f64> = docs.into_iter().map(|d| number_at(d, path)).collect();
+    Spread::of(&values).map_or(Value::Null, |s| json!(s))
+}
+
+/// A number, or JSON null when it is not finite (a median of no values).
+pub fn finite_or_null(v: f64) -> Value {
+    if v.is_finite() { json!(v) } else { Value::Null }
+}
+
+/// Adds what every merged document carries: `seeds` (every seed of the run), `per_seed` (the
+/// one-seed documents in seed order), and `shard` when the document is a shard's part.
+pub fn add_seed_fields(doc: &mut Map<String, Value>, parts: &SeedParts, shard: Option<Shard>) {
+    doc.insert("seeds".into(), json!(parts.seeds));
+    doc.insert(
+        "per_seed".into(),
+        Value::Array(parts.docs().cloned().collect()),
+    );
+    if let Some(shard) = shard {
+        doc.insert("shard".into(), json!(shard.to_string()));
+    }
+}
+
+/// The wall time of merged parts: the longest part's (shards run side by side), s.
+pub fn longest_wall_time(parts: &[Value]) -> f64 {
+    parts
+        .iter()
+        .map(|p| number_at(p, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -238,5 +504,85 @@ mod tests {
         assert_eq!(Spread::of(&[f64::NAN]), None);
         let one = Spread::of(&[2.5]).unwrap();
         assert_eq!((one.ci95_low, one.ci95_high), (2.5, 2.5));
+    }
+
+    fn doc(seeds: &[u64], mine: &[u64], shard: Option<&str>) -> Value {
+        let mut d = json!({
+            "benchmark": "place",
+            "seed": mine[0],
+            "seeds": seeds,
+            "per_seed": mine.iter().map(|s| json!({"benchmark": "place", "seed": s, "scenario": "triangle"})).collect::<Vec<_>>(),
+        });
+        if let Some(shard) = shard {
+            d["shard"] = json!(shard);
+        }
+        d
+    }
+
+    fn scenario(d: &Value) -> Value {
+        json!({ "scenario": d["scenario"] })
+    }
+
+    #[test]
+    fn gathered_shards_give_every_seed_once_in_order() {
+        let all = [100, 101, 102];
+        let parts = [
+            doc(&all, &[102], Some("2/2")),
+            doc(&all, &[100, 101], Some("1/2")),
+        ];
+        let g = gather(&parts, "place", scenario).unwrap();
+        assert_eq!(g.seeds, all);
+        let order: Vec<(u64, usize)> = g.per_seed.iter().map(|(s, p, _)| (*s, *p)).collect();
+        assert_eq!(order, [(100, 1), (101, 1), (102, 0)]);
+    }
+
+    #[test]
+    fn a_seed_twice_a_missing_shard_and_another_run_are_refused_naming_the_part() {
+        let all = [100, 101, 102];
+        let twice = gather(
+            &[
+                doc(&all, &[100, 101], Some("1/2")),
+                doc(&all, &[101, 102], Some("2/2")),
+            ],
+            "place",
+            scenario,
+        )
+        .unwrap_err();
+        assert_eq!(twice.part, Some(1));
+        assert!(twice.what.contains("seed 101 is also in part 1"), "{twice}");
+        let missing =
+            gather(&[doc(&all, &[100, 101], Some("1/2"))], "place", scenario).unwrap_err();
+        assert_eq!(missing.part, None);
+        assert!(missing.what.contains("seed 102"), "{missing}");
+        let other = gather(
+            &[
+                doc(&all, &[100, 101], Some("1/2")),
+                doc(&[100, 101, 102, 103], &[102, 103], Some("2/2")),
+            ],
+            "place",
+            scenario,
+        )
+        .unwrap_err();
+        assert_eq!(other.part, Some(1));
+        assert!(other.what.contains("another run"), "{other}");
+        let mut lshape = doc(&[103], &[103], None);
+        lshape["per_seed"][0]["scenario"] = json!("lshape");
+        let unlike = gather(&[doc(&[100], &[100], None), lshape], "place", scenario).unwrap_err();
+        assert_eq!(unlike.part, Some(1));
+        assert!(
+            unlike
+                .what
+                .contains(r#"`scenario` is "lshape", not "triangle""#),
+            "{unlike}"
+        );
+    }
+
+    #[test]
+    fn one_seed_documents_without_per_seed_merge_as_their_union() {
+        let one = |s: u64| json!({"benchmark": "place", "seed": s, "scenario": "triangle"});
+        let g = gather(&[one(7), one(3)], "place", scenario).unwrap();
+        assert_eq!(g.seeds, [3, 7]);
+        assert_eq!(seed_list(&[100, 101, 102]), "100-102");
+        assert_eq!(seed_list(&[3, 7]), "3, 7");
     }
 }

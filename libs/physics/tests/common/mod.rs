@@ -22,6 +22,14 @@ pub fn quiet(name: &str) -> Scenario {
     s
 }
 
+/// [`quiet`] with the kinematic robot, which moves exactly as commanded: the closed forms
+/// of the floor model assume a pusher that neither yields nor lags.
+pub fn quiet_kinematic(name: &str) -> Scenario {
+    let mut s = quiet(name);
+    s.robot.drive = agp_world::RobotDrive::Kinematic;
+    s
+}
+
 /// An axis-aligned rectangle object, w x h metres, centred on its centroid.
 pub fn rectangle(w: f64, h: f64) -> ObjectShape {
     let (a, b) = (w / 2.0, h / 2.0);

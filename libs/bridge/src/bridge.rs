@@ -1,0 +1,678 @@
+//! A running bridge: the topics of one side of a split pipeline, forwarded to a Zenoh
+//! session and back.
+//!
+//! Two threads, one per direction, each with its own iceoryx2 node (iceoryx2 ports never
+//! leave their thread):
+//! - *out* (this instance to the far one): drains the subscribers of the topics this side
+//!   publishes, in [`crate::BRIDGED_TOPICS`] order, and puts each message on the link's one
+//!   key for that direction. It waits on the listeners of those topics' event services (a
+//!   `ppoll` on their sockets with a deadline), never on a sleep. It keeps the latched state
+//!   ([`Latch`]) and sends it when a far end says hello, before any live message.
+//! - *in* (the far instance to this one): takes the link's messages in the order they were
+//!   put (one key, one publisher, reliable, congestion control `Block`: nothing is dropped
+//!   or reordered), checks each header, writes the bytes once into a loaned sample and
+//!   notifies the topic's event service.
+//!
+//! Epochs and tokens belong to each instance's supervisor. The planner side forwards the
+//! commands and resets of its own active epoch only (and, if its supervisor handed it the
+//! session key, only those carrying that epoch's token); the robot side republishes them
+//! with the epoch and token its own supervisor handed it, as it would hand a planner. The
+//! planner side republishes each frame with its own active epoch.
+
+use std::os::fd::RawFd;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use agp_runtime::{AgpIpc, Instance, WaitStrategy, shutdown_requested};
+use agp_shared_types::{GridHeader, SessionKey};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::FileDescriptorBased;
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
+use zenoh::qos::CongestionControl;
+
+use crate::endpoint::Endpoint;
+use crate::ports::{Auth, InPort, OutPort, Restamp, in_port, out_port};
+use crate::route::{BRIDGED_TOPICS, BridgedTopic, Latch, Side};
+use crate::wire::{self, Header, WireDecodeError};
+
+/// How a bridge runs.
+#[derive(Debug, Clone)]
+pub struct BridgeConfig {
+    pub side: Side,
+    pub endpoint: Endpoint,
+    /// The topics carried, both ways (each goes the way [`BridgedTopic::from`] says); both
+    /// ends must carry the same.
+    pub topics: Vec<BridgedTopic>,
+    /// The Zenoh key prefix both ends share (`agp` by default): two links on one Zenoh
+    /// network keep apart by it.
+    pub link: String,
+    /// Robot side: the epoch and token every forwarded command and reset carries (what this
+    /// instance's supervisor handed the bridge in `AGP_EPOCH` and `AGP_TOKEN`).
+    pub epoch: u64,
+    pub token: u64,
+    /// Planner side: this instance's session key, when its supervisor handed it: commands
+    /// and resets without their epoch's token are not forwarded.
+    pub key: Option<SessionKey>,
+    /// Prefix of the bridge's two iceoryx2 node names (`<prefix>-out`, `<prefix>-in`).
+    pub node_name: String,
+    /// How the out thread waits for the next message.
+    pub wait: WaitStrategy,
+}
+
+/// Why a bridge stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BridgeEnd {
+    /// The far end said it stopped (its run is over).
+    FarEnded,
+    /// This process was asked to stop (SIGTERM, SIGINT).
+    Stopped,
+    /// This instance's supervisor is gone (its control service with it).
+    InstanceDown,
+}
+
+/// What a bridge did, at its end.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BridgeReport {
+    pub end: BridgeEnd,
+    /// Per carried topic: its name, messages sent to the far end, messages received from it.
+    pub topics: Vec<(&'static str, u64, u64)>,
+    /// Commands and resets of another epoch than the active one, not forwarded.
+    pub stale: u64,
+    /// Commands and resets without their epoch's token, not forwarded.
+    pub refused: u64,
+}
+
+/// Why a bridge failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    #[error("bad link name `{0}`: use letters, digits, `-` and `_`")]
+    LinkName(String),
+    #[error("cannot open the Zenoh session on `{endpoint}`: {detail}")]
+    Session { endpoint: String, detail: String },
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("cannot create the bridge's iceoryx2 node: {0}")]
+    Node(String),
+    #[error("cannot open `{topic}`: {detail}")]
+    Open { topic: &'static str, detail: String },
+    #[error("cannot forward `{topic}`: {detail}")]
+    Forward { topic: &'static str, detail: String },
+    #[error(transparent)]
+    Wire(#[from] WireDecodeError),
+    #[error("the bridge's out thread could not start or panicked")]
+    Thread,
+}
+
+/// Longest single block of the out thread, so a hello or a stop is seen within it.
+const OUT_SLICE: Duration = Duration::from_millis(20);
+/// Longest single wait of the in thread.
+const IN_SLICE: Duration = Duration::from_millis(20);
+/// How often a receiving end repeats its hello until it is welcomed.
+const HELLO_EVERY: Duration = Duration::from_millis(100);
+/// How often the in thread looks whether this instance's supervisor still runs.
+const INSTANCE_CHECK_EVERY: Duration = Duration::from_millis(250);
+/// How often the in thread's publishers hand their history to new subscribers (physics and
+/// the estimator do it as often while they wait).
+const UPDATE_CONNECTIONS_EVERY: Duration = Duration::from_millis(20);
+/// Samples from the far end waiting for the in thread (a whole grid set and then some).
+const IN_QUEUE: usize = 1024;
+
+struct Shared {
+    stop: AtomicBool,
+    /// Planner side: its supervisor's active epoch, read by the out thread.
+    active_epoch: AtomicU64,
+    sent: [AtomicU64; BRIDGED_TOPICS.len()],
+    received: [AtomicU64; BRIDGED_TOPICS.len()],
+    stale: AtomicU64,
+    refused: AtomicU64,
+}
+
+fn slot(topic: &BridgedTopic) -> usize {
+    BRIDGED_TOPICS
+        .iter()
+        .position(|n| *n == topic.name)
+        .unwrap_or(0)
+}
+
+fn direction_key(link: &str, to: Side) -> String {
+    format!("{link}/to_{}", to.name())
+}
+
+fn hello_key(link: &str, to: Side) -> String {
+    format!("{link}/hello/to_{}", to.name())
+}
+
+fn zenoh_err(e: impl std::fmt::Display) -> BridgeError {
+    BridgeError::Zenoh(e.to_string())
+}
+
+/// Runs a bridge on `instance` until the far end ends or this process is asked to stop
+/// (`agp_runtime::shutdown_requested`); `on_ready` is called once every port of both
+/// directions is open. Connecting waits for the far end as long as it takes.
+pub fn run_bridge(
+    instance: &Instance,
+    config: &BridgeConfig,
+    on_ready: impl FnOnce(),
+) -> Result<BridgeReport, BridgeError> {
+    if config.link.is_empty()
+        || !config
+            .link
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        return Err(BridgeError::LinkName(config.link.clone()));
+    }
+    let zconfig = config
+        .endpoint
+        .zenoh_config()
+        .map_err(|detail| BridgeError::Session {
+            endpoint: config.endpoint.locator().to_owned(),
+            detail,
+        })?;
+    let session = zenoh::open(zconfig)
+        .wait()
+        .map_err(|e| BridgeError::Session {
+            endpoint: config.endpoint.locator().to_owned(),
+            detail: e.to_string(),
+        })?;
+    let shared = Arc::new(Shared {
+        stop: AtomicBool::new(false),
+        active_epoch: AtomicU64::new(0),
+        sent: Default::default(),
+        received: Default::default(),
+        stale: AtomicU64::new(0),
+        refused: AtomicU64::new(0),
+    });
+    let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), BridgeError>>(1);
+    let out = {
+        let instance = instance.clone();
+        let config = config.clone();
+        let session = session.clone();
+        let shared = Arc::clone(&shared);
+        std::thread::Builder::new()
+            .name("agp-bridge-out".into())
+            .spawn(move || {
+                let r = out_loop(&instance, &config, &session, &shared, &ready_tx);
+                shared.stop.store(true, Ordering::SeqCst);
+                r
+            })
+            .map_err(|_| BridgeError::Thread)?
+    };
+    let end = match ready_rx.recv() {
+        Ok(Ok(())) => in_loop(instance, config, &session, &shared, on_ready),
+        Ok(Err(e)) => Err(e),
+        Err(_) => Err(BridgeError::Thread),
+    };
+    shared.stop.store(true, Ordering::SeqCst);
+    let out = out.join().map_err(|_| BridgeError::Thread);
+    let _ = session.close().wait();
+    let end = end?;
+    out??;
+    Ok(BridgeReport {
+        end,
+        topics: config
+            .topics
+            .iter()
+            .map(|t| {
+                let i = slot(t);
+                (
+                    t.name,
+                    shared.sent[i].load(Ordering::Relaxed),
+                    shared.received[i].load(Ordering::Relaxed),
+                )
+            })
+            .collect(),
+        stale: shared.stale.load(Ordering::Relaxed),
+        refused: shared.refused.load(Ordering::Relaxed),
+    })
+}
+
+/// What the out thread keeps of one topic for a far end that joins late.
+enum Cache {
+    None,
+    Latest(Option<Vec<u8>>),
+    GridSet { seq: u64, grids: Vec<Vec<u8>> },
+}
+
+impl Cache {
+    fn of(latch: Latch) -> Self {
+        match latch {
+            Latch::None => Self::None,
+            Latch::Latest => Self::Latest(None),
+            Latch::GridSet => Self::GridSet {
+                seq: 0,
+                grids: Vec::new(),
+            },
+        }
+    }
+
+    fn keep(&mut self, bytes: &[u8]) {
+        match self {
+            Self::None => {}
+            Self::Latest(slot) => {
+                let v = slot.get_or_insert_with(|| Vec::with_capacity(bytes.len()));
+                v.clear();
+                v.extend_from_slice(bytes);
+            }
+            Self::GridSet { seq, grids } => {
+                let header: Option<GridHeader> = bytes
+                    .get(..size_of::<GridHeader>())
+                    .and_then(agp_recording::payload_from_bytes);
+                let s = header.map_or(0, |h| h.seq);
+                if s != *seq {
+                    *seq = s;
+                    grids.clear();
+                }
+                grids.push(bytes.to_vec());
+            }
+        }
+    }
+
+    fn each(&self, mut f: impl FnMut(&[u8]) -> Result<(), BridgeError>) -> Result<(), BridgeError> {
+        match self {
+            Self::None | Self::Latest(None) => Ok(()),
+            Self::Latest(Some(v)) => f(v),
+            Self::GridSet { grids, .. } => grids.iter().try_for_each(|g| f(g)),
+        }
+    }
+}
+
+/// One topic this side sends.
+struct Outgoing {
+    topic: BridgedTopic,
+    slot: usize,
+    port: Box<dyn OutPort>,
+    cache: Cache,
+    header: ZBytes,
+}
+
+fn out_loop(
+    instance: &Instance,
+    config: &BridgeConfig,
+    session: &zenoh::Session,
+    shared: &Shared,
+    ready: &std::sync::mpsc::SyncSender<Result<(), BridgeError>>,
+) -> Result<(), BridgeError> {
+    let opened = open_out(instance, config, session);
+    let (node, mut outgoing, listeners, epochs, publisher, hellos) = match opened {
+        Ok(o) => {
+            let _ = ready.send(Ok(()));
+            o
+        }
+        Err(e) => {
+            let _ = ready.send(Err(BridgeError::Thread));
+            return Err(e);
+        }
+    };
+    let _node = node;
+    let fds: Vec<RawFd> = listeners
+        .iter()
+        // SAFETY: the descriptors are only polled while their listeners live (this thread
+        // owns both), never closed or handed out.
+        .map(|l| unsafe { l.file_descriptor().native_handle() })
+        .collect();
+    let put = |bytes: &[u8], header: &ZBytes| -> Result<(), BridgeError> {
+        publisher
+            .put(bytes.to_vec())
+            .attachment(header.clone())
+            .wait()
+            .map_err(zenoh_err)
+    };
+    let welcome_of = |nonce: u64| ZBytes::from(Header::Welcome { nonce }.encode());
+    let mut served: Option<u64> = None;
+    let mut live = false;
+    let mut active = shared.active_epoch.load(Ordering::Relaxed);
+    let mut last_activity = Instant::now();
+    let side = config.side;
+    let key = config.key;
+    loop {
+        if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
+            if live {
+                let _ = publisher
+                    .put(Vec::<u8>::new())
+                    .attachment(ZBytes::from(Header::Bye.encode()))
+                    .wait();
+            }
+            return Ok(());
+        }
+        // A far end that just joined: the latched state first, then the live messages.
+        while let Ok(Some(hello)) = hellos.try_recv() {
+            let nonce = match hello.attachment().map(|a| a.to_bytes()) {
+                Some(text) => match wire::decode(&text)? {
+                    Header::Hello { nonce } => nonce,
+                    _ => continue,
+                },
+                None => continue,
+            };
+            if served == Some(nonce) {
+                continue;
+            }
+            for o in &outgoing {
+                o.cache.each(|bytes| {
+                    put(bytes, &o.header)?;
+                    shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
+                    Ok(())
+                })?;
+            }
+            put(&[], &welcome_of(nonce))?;
+            served = Some(nonce);
+            live = true;
+        }
+        if let Some(epochs) = &epochs {
+            while let Ok(Some(e)) = epochs.receive() {
+                active = e.epoch;
+            }
+            shared.active_epoch.store(active, Ordering::Relaxed);
+        }
+        let mut moved = 0;
+        for o in &mut outgoing {
+            let mut failed = None;
+            let topic = o.topic;
+            let cache = &mut o.cache;
+            let header = &o.header;
+            let slot = o.slot;
+            let drained = o.port.drain(&mut |bytes, auth| {
+                if failed.is_some() {
+                    return;
+                }
+                if let (Side::Planner, Some(Auth { epoch, token })) = (side, auth) {
+                    if epoch > active {
+                        // The supervisor made a newer epoch active before its planner sent.
+                        if let Some(epochs) = &epochs {
+                            while let Ok(Some(e)) = epochs.receive() {
+                                active = e.epoch;
+                            }
+                            shared.active_epoch.store(active, Ordering::Relaxed);
+                        }
+                    }
+                    if epoch != active {
+                        shared.stale.fetch_add(1, Ordering::Relaxed);
+                        return;
+                    }
+                    if key.is_some_and(|k| k.token(epoch) != token) {
+                        shared.refused.fetch_add(1, Ordering::Relaxed);
+                        return;
+                    }
+                }
+                cache.keep(bytes);
+                if live {
+                    match put(bytes, header) {
+                        Ok(()) => {
+                            shared.sent[slot].fetch_add(1, Ordering::Relaxed);
+                        }
+                        Err(e) => failed = Some(e),
+                    }
+                }
+            });
+            match drained {
+                Ok(n) => moved += n,
+                Err(detail) => {
+                    return Err(BridgeError::Forward {
+                        topic: topic.name,
+                        detail,
+                    });
+                }
+            }
+            if let Some(e) = failed {
+                return Err(e);
+            }
+        }
+        if moved > 0 {
+            last_activity = Instant::now();
+            continue;
+        }
+        wait_for_any(&listeners, &fds, config.wait, last_activity.elapsed());
+    }
+}
+
+type OutPorts = (
+    iceoryx2::prelude::Node<AgpIpc>,
+    Vec<Outgoing>,
+    Vec<Listener<AgpIpc>>,
+    Option<iceoryx2::port::subscriber::Subscriber<AgpIpc, agp_shared_types::ActiveEpoch, ()>>,
+    zenoh::pubsub::Publisher<'static>,
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+);
+
+fn open_out(
+    instance: &Instance,
+    config: &BridgeConfig,
+    session: &zenoh::Session,
+) -> Result<OutPorts, BridgeError> {
+    let node = instance
+        .node(&format!("{}-out", config.node_name), false)
+        .map_err(|e| BridgeError::Node(format!("{e:?}")))?;
+    let mut outgoing = Vec::new();
+    let mut listeners = Vec::new();
+    for topic in config.topics.iter().filter(|t| t.from == config.side) {
+        let (port, listener) =
+            out_port(instance, &node, topic).map_err(|detail| BridgeError::Open {
+                topic: topic.name,
+                detail,
+            })?;
+        listeners.push(listener);
+        outgoing.push(Outgoing {
+            topic: *topic,
+            slot: slot(topic),
+            port,
+            cache: Cache::of(topic.latch),
+            header: ZBytes::from(
+                Header::Data {
+                    service: topic.service,
+                    type_name: topic.type_name,
+                }
+                .encode(),
+            ),
+        });
+    }
+    // The planner side forwards the commands of its supervisor's active epoch only.
+    let epochs = match config.side {
+        Side::Robot => None,
+        Side::Planner => {
+            let t = instance
+                .active_epoch(&node)
+                .map_err(|e| BridgeError::Open {
+                    topic: "active_epoch",
+                    detail: e.to_string(),
+                })?;
+            Some(t.subscriber().create().map_err(|e| BridgeError::Open {
+                topic: "active_epoch",
+                detail: format!("{e:?}"),
+            })?)
+        }
+    };
+    let to = config.side.far();
+    let publisher = session
+        .declare_publisher(direction_key(&config.link, to))
+        .congestion_control(CongestionControl::Block)
+        .express(true)
+        .wait()
+        .map_err(zenoh_err)?;
+    let hellos = session
+        .declare_subscriber(hello_key(&config.link, to))
+        .wait()
+        .map_err(zenoh_err)?;
+    Ok((node, outgoing, listeners, epochs, publisher, hellos))
+}
+
+/// Waits for a notification on any listener, as `strategy` says: polling with yields for
+/// its spin (counted from the last message), then blocking in `ppoll` on the listeners'
+/// sockets for at most [`OUT_SLICE`]. A notification found pending returns at once.
+fn wait_for_any(
+    listeners: &[Listener<AgpIpc>],
+    fds: &[RawFd],
+    strategy: WaitStrategy,
+    idle: Duration,
+) {
+    let block = match strategy {
+        WaitStrategy::Spin => {
+            core::hint::spin_loop();
+            false
+        }
+        WaitStrategy::Yield => {
+            std::thread::yield_now();
+            false
+        }
+        WaitStrategy::SpinThenBlock { spin } if idle < spin => {
+            std::thread::yield_now();
+            false
+        }
+        WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. } => true,
+    };
+    if !block {
+        return;
+    }
+    let mut pending = 0;
+    for l in listeners {
+        pending += l.try_wait(|_| {}).unwrap_or(0);
+    }
+    if pending > 0 {
+        return;
+    }
+    let mut polled: [libc::pollfd; BRIDGED_TOPICS.len()] = [libc::pollfd {
+        fd: -1,
+        events: libc::POLLIN,
+        revents: 0,
+    }; BRIDGED_TOPICS.len()];
+    for (p, fd) in polled.iter_mut().zip(fds) {
+        p.fd = *fd;
+    }
+    let timeout = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: OUT_SLICE.subsec_nanos() as libc::c_long,
+    };
+    // SAFETY: the listeners' sockets stay open while they live, and they outlive this call;
+    // `ppoll` only reads the pollfds and the timespec we own and keeps the signal mask.
+    // Unused entries have fd -1, which ppoll ignores.
+    let woken = unsafe {
+        libc::ppoll(
+            polled.as_mut_ptr(),
+            polled.len() as libc::nfds_t,
+            &timeout,
+            std::ptr::null(),
+        )
+    };
+    if woken > 0 {
+        for l in listeners {
+            let _ = l.try_wait(|_| {});
+        }
+    }
+}
+
+fn in_loop(
+    instance: &Instance,
+    config: &BridgeConfig,
+    session: &zenoh::Session,
+    shared: &Shared,
+    on_ready: impl FnOnce(),
+) -> Result<BridgeEnd, BridgeError> {
+    let _node = instance
+        .node(&format!("{}-in", config.node_name), false)
+        .map_err(|e| BridgeError::Node(format!("{e:?}")))?;
+    let mut incoming: Vec<(usize, Box<dyn InPort>)> = Vec::new();
+    let mut carried = Vec::new();
+    for topic in &config.topics {
+        if topic.from != config.side {
+            let port = in_port(instance, &_node, topic).map_err(|detail| BridgeError::Open {
+                topic: topic.name,
+                detail,
+            })?;
+            incoming.push((slot(topic), port));
+        }
+        carried.push(*topic);
+    }
+    let mut latched = [false; BRIDGED_TOPICS.len()];
+    for t in &carried {
+        latched[slot(t)] = t.latch != Latch::None;
+    }
+    let index_of: Vec<Option<usize>> = carried
+        .iter()
+        .map(|t| incoming.iter().position(|(s, _)| *s == slot(t)))
+        .collect();
+    let side = config.side;
+    let subscriber = session
+        .declare_subscriber(direction_key(&config.link, side))
+        .with(zenoh::handlers::FifoChannel::new(IN_QUEUE))
+        .wait()
+        .map_err(zenoh_err)?;
+    let hello_pub = session
+        .declare_publisher(hello_key(&config.link, side))
+        .congestion_control(CongestionControl::Block)
+        .wait()
+        .map_err(zenoh_err)?;
+    on_ready();
+    let nonce = agp_shared_types::monotonic_ns() ^ (u64::from(std::process::id()) << 40);
+    let hello = ZBytes::from(Header::Hello { nonce }.encode());
+    let mut welcomed = false;
+    let mut last_hello: Option<Instant> = None;
+    let mut last_check = Instant::now();
+    let mut last_update = Instant::now();
+    loop {
+        if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
+            return Ok(BridgeEnd::Stopped);
+        }
+        if last_check.elapsed() >= INSTANCE_CHECK_EVERY {
+            if !instance.control_exists() {
+                return Ok(BridgeEnd::InstanceDown);
+            }
+            last_check = Instant::now();
+        }
+        if !welcomed && last_hello.is_none_or(|t| t.elapsed() >= HELLO_EVERY) {
+            hello_pub
+                .put(Vec::<u8>::new())
+                .attachment(hello.clone())
+                .wait()
+                .map_err(zenoh_err)?;
+            last_hello = Some(Instant::now());
+        }
+        if last_update.elapsed() >= UPDATE_CONNECTIONS_EVERY {
+            // Only the latched topics keep a history to hand over.
+            for (s, port) in &incoming {
+                if latched[*s] {
+                    port.update_connections();
+                }
+            }
+            last_update = Instant::now();
+        }
+        let sample = match subscriber.recv_timeout(IN_SLICE) {
+            Ok(Some(s)) => s,
+            Ok(None) => continue,
+            Err(e) => return Err(zenoh_err(e)),
+        };
+        let text = sample
+            .attachment()
+            .map(|a| a.to_bytes())
+            .unwrap_or_default();
+        match wire::decode(&text)? {
+            Header::Data { service, type_name } => {
+                let payload = sample.payload().to_bytes();
+                let at = wire::check_data(&carried, side, service, type_name, payload.len())?;
+                let Some(i) = index_of[at] else {
+                    continue;
+                };
+                let restamp = match side {
+                    Side::Robot => Restamp {
+                        epoch: config.epoch,
+                        token: config.token,
+                    },
+                    Side::Planner => Restamp {
+                        epoch: shared.active_epoch.load(Ordering::Relaxed),
+                        token: 0,
+                    },
+                };
+                let (s, port) = &mut incoming[i];
+                port.publish(&payload, restamp)
+                    .map_err(|detail| BridgeError::Forward {
+                        topic: carried[at].name,
+                        detail,
+                    })?;
+                shared.received[*s].fetch_add(1, Ordering::Relaxed);
+            }
+            Header::Welcome { nonce: n } if n == nonce => welcomed = true,
+            Header::Welcome { .. } | Header::Hello { .. } => {}
+            Header::Bye => return Ok(BridgeEnd::FarEnded),
+        }
+    }
+}

@@ -1,0 +1,125 @@
+//! Where the Zenoh link runs: one end listens on a TCP endpoint, the other connects to it;
+//! nothing is scouted.
+
+/// One end of the link: `tcp/HOST:PORT`, listened on or connected to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    Listen(String),
+    Connect(String),
+}
+
+/// Why an endpoint was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EndpointParseError {
+    #[error("`{0}` is not a TCP endpoint: expected `tcp/HOST:PORT`, e.g. `tcp/127.0.0.1:7447`")]
+    NotTcp(String),
+    #[error("`{0}` has no port from 1 to 65535: expected `tcp/HOST:PORT`")]
+    BadPort(String),
+}
+
+impl Endpoint {
+    /// The endpoint as Zenoh names it.
+    pub fn locator(&self) -> &str {
+        match self {
+            Self::Listen(l) | Self::Connect(l) => l,
+        }
+    }
+
+    /// Checks `tcp/HOST:PORT` (an IPv6 host in brackets: `tcp/[::1]:7447`).
+    pub fn check(locator: &str) -> Result<(), EndpointParseError> {
+        let Some(rest) = locator.strip_prefix("tcp/") else {
+            return Err(EndpointParseError::NotTcp(locator.to_owned()));
+        };
+        let Some((host, port)) = rest.rsplit_once(':') else {
+            return Err(EndpointParseError::NotTcp(locator.to_owned()));
+        };
+        if host.is_empty() || host.contains('/') || host.contains('#') || host.contains('?') {
+            return Err(EndpointParseError::NotTcp(locator.to_owned()));
+        }
+        match port.parse::<u16>() {
+            Ok(p) if p > 0 => Ok(()),
+            _ => Err(EndpointParseError::BadPort(locator.to_owned())),
+        }
+    }
+
+    /// A listening end, checked.
+    pub fn listen(locator: &str) -> Result<Self, EndpointParseError> {
+        Self::check(locator)?;
+        Ok(Self::Listen(locator.to_owned()))
+    }
+
+    /// A connecting end, checked.
+    pub fn connect(locator: &str) -> Result<Self, EndpointParseError> {
+        Self::check(locator)?;
+        Ok(Self::Connect(locator.to_owned()))
+    }
+
+    /// The Zenoh configuration of this end: a peer that listens on this endpoint only, or
+    /// connects to it only (and listens nowhere), with multicast and gossip scouting off,
+    /// so the bridge opens no socket but the one named.
+    pub(crate) fn zenoh_config(&self) -> Result<zenoh::Config, String> {
+        let mut c = zenoh::Config::default();
+        let json = |v: &str| serde_json_string(v);
+        let (listen, connect) = match self {
+            Self::Listen(l) => (format!("[{}]", json(l)), "[]".to_owned()),
+            Self::Connect(l) => ("[]".to_owned(), format!("[{}]", json(l))),
+        };
+        for (key, value) in [
+            ("mode", "\"peer\"".to_owned()),
+            ("listen/endpoints", listen),
+            ("connect/endpoints", connect),
+            ("scouting/multicast/enabled", "false".to_owned()),
+            ("scouting/gossip/enabled", "false".to_owned()),
+            // A connecting end may start before the listening one: it retries for ever.
+            ("connect/timeout_ms", "-1".to_owned()),
+            ("connect/exit_on_failure", "false".to_owned()),
+        ] {
+            c.insert_json5(key, &value)
+                .map_err(|e| format!("zenoh config `{key}`: {e}"))?;
+        }
+        Ok(c)
+    }
+}
+
+/// `s` as a JSON string literal (the locators hold no quote or backslash once checked, but
+/// the escaping costs nothing).
+fn serde_json_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tcp_endpoint_with_a_port_is_taken_and_anything_else_refused() {
+        assert!(Endpoint::listen("tcp/127.0.0.1:7447").is_ok());
+        assert!(Endpoint::connect("tcp/[::1]:7447").is_ok());
+        assert!(matches!(
+            Endpoint::listen("udp/127.0.0.1:7447"),
+            Err(EndpointParseError::NotTcp(_))
+        ));
+        assert!(matches!(
+            Endpoint::listen("tcp/127.0.0.1"),
+            Err(EndpointParseError::NotTcp(_))
+        ));
+        assert!(matches!(
+            Endpoint::listen("tcp/127.0.0.1:0"),
+            Err(EndpointParseError::BadPort(_))
+        ));
+        assert!(matches!(
+            Endpoint::listen("tcp/127.0.0.1:70000"),
+            Err(EndpointParseError::BadPort(_))
+        ));
+    }
+}

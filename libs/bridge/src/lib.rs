@@ -1,0 +1,21 @@
+//! Forwarding an agp instance's topics to a Zenoh session and back, so the planner of one instance drives the physics and estimator of another that shares no memory with it.
+//!
+//! Each payload crosses as its `#[repr(C)]` bytes, its iceoryx2 type name and size checked
+//! at the far end ([`wire`]); frames, estimates and grids go from the robot side to the
+//! planner side, commands, resets, the planner's events and the task back ([`BRIDGED_TOPICS`]).
+//! The latched state (the latest frame, estimate and task, the latest whole grid set) is
+//! sent once to a far end that joins, then only what is published: a grid set crosses once.
+
+mod bridge;
+mod endpoint;
+mod ports;
+mod route;
+pub mod wire;
+
+pub use bridge::{BridgeConfig, BridgeEnd, BridgeError, BridgeReport, run_bridge};
+pub use endpoint::{Endpoint, EndpointParseError};
+pub use ports::Restamp;
+pub use route::{
+    BRIDGED_TOPICS, BridgedTopic, Latch, Side, TopicListParseError, all_topics, bridged_topic,
+    parse_topics,
+};
