@@ -22,7 +22,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Map, Value, json};
 
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, add_seed_fields, finite_or_null, gather, longest_wall_time,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
     number_at, seed_list, spread_at,
 };
 
@@ -450,24 +450,14 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
     }
     doc.insert("objects".into(), Value::Object(objects));
     doc.insert("targets_missed".into(), Value::Array(missed));
-    add_seed_fields(&mut doc, parts, shard);
-    let wall = docs
-        .iter()
-        .map(|d| number_at(d, &["wall_time_s"]))
-        .filter(|v| v.is_finite())
-        .fold(0.0, f64::max);
-    doc.insert("wall_time_s".into(), json!(wall));
-    Value::Object(doc)
+    finish_seed_doc(doc, parts, shard)
 }
 
 /// Merges learning documents of disjoint seed sets (one-seed documents, whole runs or a
 /// run's shards) into the document one run over all their seeds writes, seeds in order;
 /// `wall_time_s` is the longest part's.
 pub fn merge(parts: &[Value]) -> Result<Value> {
-    let gathered = gather(parts, "learn", learn_signature).map_err(anyhow::Error::new)?;
-    let mut doc = assemble(&gathered, None);
-    doc["wall_time_s"] = json!(longest_wall_time(parts));
-    Ok(doc)
+    Ok(merge_parts(parts, "learn", learn_signature, assemble)?)
 }
 
 /// The human table of a run over several seeds: per object, each figure as mean (min-max)

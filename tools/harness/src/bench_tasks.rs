@@ -30,8 +30,8 @@ use serde::Serialize;
 use serde_json::{Map, Value, json};
 
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, add_seed_fields, finite_or_null, gather, longest_wall_time,
-    number_at, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, finish_seed_doc, finite_or_null, gather, merge_parts, number_at,
+    seed_list, spread_at,
 };
 
 /// What every bench output says about where the physics ran.
@@ -550,24 +550,14 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
     doc.insert("tolerance_mm".into(), first["tolerance_mm"].clone());
     doc.insert("tolerance_deg".into(), first["tolerance_deg"].clone());
     doc.insert("planners".into(), Value::Object(planners));
-    add_seed_fields(&mut doc, parts, shard);
-    let wall = docs
-        .iter()
-        .map(|d| number_at(d, &["wall_time_s"]))
-        .filter(|v| v.is_finite())
-        .fold(0.0, f64::max);
-    doc.insert("wall_time_s".into(), json!(wall));
-    Value::Object(doc)
+    finish_seed_doc(doc, parts, shard)
 }
 
 /// Merges place documents of disjoint seed sets (one-seed documents, whole runs or a run's
 /// shards) into the document one run over all their seeds writes, seeds in order. Every
 /// figure is recomputed from the episodes; `wall_time_s` is the longest part's.
 pub fn merge(parts: &[Value]) -> Result<Value> {
-    let gathered = gather(parts, "place", place_signature).map_err(anyhow::Error::new)?;
-    let mut doc = assemble(&gathered, None);
-    doc["wall_time_s"] = json!(longest_wall_time(parts));
-    Ok(doc)
+    Ok(merge_parts(parts, "place", place_signature, assemble)?)
 }
 
 /// The human table of a place document: one row per planner, each figure as one seed's

@@ -16,7 +16,7 @@ use crate::bench_tasks::{
     resolve_ag, write_json,
 };
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, add_seed_fields, finite_or_null, gather, longest_wall_time,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
     number_at, seed_list, spread_at,
 };
 use crate::side_by_side::side_by_side;
@@ -247,24 +247,19 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
     doc.insert("planners".into(), overall_value);
     doc.insert("ratio".into(), finite_or_null(ratio));
     doc.insert("paths".into(), Value::Object(paths));
-    add_seed_fields(&mut doc, parts, shard);
-    let wall = docs
-        .iter()
-        .map(|d| number_at(d, &["wall_time_s"]))
-        .filter(|v| v.is_finite())
-        .fold(0.0, f64::max);
-    doc.insert("wall_time_s".into(), json!(wall));
-    Value::Object(doc)
+    finish_seed_doc(doc, parts, shard)
 }
 
 /// Merges trajectory documents of disjoint seed sets (whole runs, shards' parts, one-seed
 /// documents) into the document one run over all their seeds writes, but for
 /// `wall_time_s`: the longest part's.
 pub fn merge(parts: &[Value]) -> Result<Value> {
-    let gathered = gather(parts, "trajectory", trajectory_signature).map_err(anyhow::Error::new)?;
-    let mut doc = assemble(&gathered, None);
-    doc["wall_time_s"] = json!(longest_wall_time(parts));
-    Ok(doc)
+    Ok(merge_parts(
+        parts,
+        "trajectory",
+        trajectory_signature,
+        assemble,
+    )?)
 }
 
 /// The human table of a trajectory document: per path each planner's mean error, mean

@@ -442,6 +442,38 @@ pub fn add_seed_fields(doc: &mut Map<String, Value>, parts: &SeedParts, shard: O
     }
 }
 
+/// Closes a document a benchmark assembled from its seeds' documents: `seeds`,
+/// `per_seed`, the shard, and `wall_time_s`, the longest seed's (the seeds run side by
+/// side).
+pub fn finish_seed_doc(
+    mut doc: Map<String, Value>,
+    parts: &SeedParts,
+    shard: Option<Shard>,
+) -> Value {
+    add_seed_fields(&mut doc, parts, shard);
+    let wall = parts
+        .docs()
+        .map(|d| number_at(d, &["wall_time_s"]))
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    doc.insert("wall_time_s".into(), json!(wall));
+    Value::Object(doc)
+}
+
+/// A benchmark's `merge`: the parts gathered and checked ([`gather`]), assembled by the
+/// benchmark's own `assemble` (the one its runs use), `wall_time_s` the longest part's.
+pub fn merge_parts(
+    parts: &[Value],
+    benchmark: &str,
+    signature: impl Fn(&Value) -> Value,
+    assemble: impl Fn(&SeedParts, Option<Shard>) -> Value,
+) -> Result<Value, MergePartError> {
+    let gathered = gather(parts, benchmark, signature)?;
+    let mut doc = assemble(&gathered, None);
+    doc["wall_time_s"] = json!(longest_wall_time(parts));
+    Ok(doc)
+}
+
 /// The wall time of merged parts: the longest part's (shards run side by side), s.
 pub fn longest_wall_time(parts: &[Value]) -> f64 {
     parts
