@@ -1450,23 +1450,7 @@ pub fn lookahead_point(path: &[DVec2], p: DVec2, ahead: f64) -> DVec2 {
         return p;
     };
     // The projection: arc length of the closest point.
-    let (mut best_d, mut best_s, mut s0) = (f64::INFINITY, 0.0, 0.0);
-    for w in path.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let ab = b - a;
-        let len = ab.length();
-        let t = if len > 1e-12 {
-            ((p - a).dot(ab) / (len * len)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let d = (a + t * ab - p).length();
-        if d < best_d {
-            best_d = d;
-            best_s = s0 + t * len;
-        }
-        s0 += len;
-    }
+    let (best_s, _) = path_projection(path, p);
     let mut s = best_s + ahead;
     for w in path.windows(2) {
         let len = (w[1] - w[0]).length();
