@@ -434,13 +434,16 @@ fn up_after_a_supervisor_killed_with_9_is_not_refused_for_a_status_client_still_
     let dead = up.wait(TIMEOUT);
     assert_eq!(dead.status.signal(), Some(libc::SIGKILL));
 
-    // The client gives up on the dead supervisor instead of waiting out its timeout...
+    // The client gives up on the dead supervisor instead of waiting out its timeout (if
+    // the kill came before its request was out, it finds no supervisor at all: on a loaded
+    // machine either happens, and either is an answer)...
     let asked = finish(status);
     assert!(!asked.status.success(), "{}", asked.stderr);
     assert!(
         asked
             .stderr
-            .contains("the supervisor died before it answered"),
+            .contains("the supervisor died before it answered")
+            || asked.stderr.contains("no supervisor answers on instance"),
         "{}",
         asked.stderr
     );
