@@ -201,6 +201,17 @@ impl<'a> Runner<'a> {
     }
 }
 
+/// The instance tag of `planner`'s pipeline: three letters, and the seed when several
+/// seeds run side by side (two pipelines of one planner may then run at once).
+pub(crate) fn instance_tag(planner: PlannerKind, seed: u64, several_seeds: bool) -> String {
+    let short = planner.name().get(..3).unwrap_or(planner.name());
+    if several_seeds {
+        format!("{short}{seed}")
+    } else {
+        short.to_owned()
+    }
+}
+
 /// The progress bar's label for planners that run side by side.
 pub(crate) fn prefix_of(planners: &[PlannerKind]) -> String {
     planners
@@ -291,16 +302,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
         .collect();
     let bar = progress((args.episodes * work.len()) as u64);
     bar.set_prefix(prefix_of(&planners));
-    // Two pipelines of one planner may run at once when seeds run side by side: the seed
-    // tells their instances apart.
-    let tag = |planner: PlannerKind, seed: u64| {
-        let short = planner.name().get(..3).unwrap_or(planner.name());
-        if seeds.len() > 1 {
-            format!("{short}{seed}")
-        } else {
-            short.to_owned()
-        }
-    };
+    let tag = |planner: PlannerKind, seed: u64| instance_tag(planner, seed, seeds.len() > 1);
     let runs = side_by_side(&work, |&(seed, planner)| {
         let started = Instant::now();
         let goals = place_goals(&scenario, args.episodes, seed);

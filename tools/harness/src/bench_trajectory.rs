@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::bench_tasks::{
-    Overlay, Panel, Runner, judged, physics_label, physics_note, plot_runs, prefix_of, progress,
-    resolve_ag, write_json,
+    Overlay, Panel, Runner, instance_tag, judged, physics_label, physics_note, plot_runs,
+    prefix_of, progress, resolve_ag, write_json,
 };
 use crate::seeds::{
     SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
@@ -370,16 +370,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         .collect();
     let bar = progress((paths.len() * work.len()) as u64);
     bar.set_prefix(prefix_of(&PLANNERS));
-    // Two pipelines of one planner may run at once when seeds run side by side: the seed
-    // tells their instances apart.
-    let tag = |planner: PlannerKind, seed: u64| {
-        let short = planner.name().get(..3).unwrap_or(planner.name());
-        if seeds.len() > 1 {
-            format!("{short}{seed}")
-        } else {
-            short.to_owned()
-        }
-    };
+    let tag = |planner: PlannerKind, seed: u64| instance_tag(planner, seed, seeds.len() > 1);
     let runs = side_by_side(&work, |&(seed, planner)| {
         let started = Instant::now();
         let mut runner = Runner::start_tagged(
