@@ -33,6 +33,7 @@ TOPICS = [
     "agp/active_epoch",
     "agp/learn_events",
     "agp/learn_reports",
+    "agp/goal_ends",
 ]
 
 # (status process, status rate topic) -> recorded channel

@@ -150,11 +150,13 @@ class Task(ctypes.Structure):
         ("max_pushes", ctypes.c_uint32),
         ("_pad", ctypes.c_uint32),
         ("seed", ctypes.c_uint64),
+        # Trajectory: the object's heading kept tangent to the path within this; 0: none.
+        ("heading_tolerance_rad", ctypes.c_double),
     ]
 
     @staticmethod
     def type_name() -> str:
-        return "agp::Task.v1"
+        return "agp::Task.v2"
 
 
 # `stage` (payloads.rs): indices of `TimingHeader.stamps_ns`.
@@ -214,7 +216,7 @@ assert ctypes.sizeof(ObjectEstimate) == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16
 assert ctypes.sizeof(GridHeader) == 8 + 4 * 4 + 8 * 8 == 88
 assert ctypes.sizeof(GradientGrid) == 88 + 4 * GRID_CELLS
 assert ctypes.sizeof(LearnEvent) == 8 * 2 + 4 * 4 + 8 * 3 + 24 + 8 + 32 + 24 + 16 + 8 == 168
-assert ctypes.sizeof(Task) == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16
+assert ctypes.sizeof(Task) == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16 + 8
 for t in (IrFrame, MotorCommand, ObjectEstimate, GradientGrid, LearnEvent, Task):
     assert ctypes.alignment(t) == 8
 

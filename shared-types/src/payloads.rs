@@ -412,7 +412,7 @@ pub enum TaskKind {
 /// The task, as the supervisor hands it to the planner.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::Task.v1")]
+#[type_name("agp::Task.v2")]
 pub struct Task {
     /// A [`TaskKind`] as u32.
     pub kind: u32,
@@ -425,6 +425,9 @@ pub struct Task {
     pub max_pushes: u32,
     pub _pad: u32,
     pub seed: u64,
+    /// Trajectory: keep the object's heading (its frame's x axis) tangent to the path
+    /// within this (rad); 0: no heading asked.
+    pub heading_tolerance_rad: f64,
 }
 
 /// A goal of a live session: the supervisor queues the goals `agp goal` sends and
@@ -432,7 +435,7 @@ pub struct Task {
 /// the latest one it has not ended. Id 0: no goal.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::Goal.v1")]
+#[type_name("agp::Goal.v2")]
 pub struct Goal {
     /// 1, 2, ... in the order they were queued; 0: none.
     pub id: u64,
@@ -453,14 +456,36 @@ impl Default for Goal {
                 max_pushes: 0,
                 _pad: 0,
                 seed: 0,
+                heading_tolerance_rad: 0.0,
             },
         }
     }
 }
 
+/// How long the planner's word for how a goal ended may be (`GoalEnd::end`).
+pub const GOAL_END_NAME_LEN: usize = 32;
+
+/// A goal of a live session that the serving planner ended, relayed to the supervisor that
+/// judges it when that supervisor runs on the other side of a bridge: the planner's own
+/// supervisor takes its `GoalDone` request and publishes this on
+/// [`crate::ServiceNames::GOAL_ENDS`], the bridge carries it, and the robot side's
+/// supervisor, which owns the goal and the judge, scores it as if its own planner had said.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("agp::GoalEnd.v1")]
+pub struct GoalEnd {
+    /// The goal's id (as [`Goal::id`]).
+    pub id: u64,
+    /// Simulated time the planner took for it, nanoseconds.
+    pub sim_time_ns: u64,
+    /// How the planner says it ended (`placed`, `max-pushes`, ...), NUL-padded UTF-8.
+    pub end: [u8; GOAL_END_NAME_LEN],
+}
+
 const _: () = {
     use core::mem::{align_of, size_of};
     assert!(size_of::<Goal>() == 8 + size_of::<Task>() && align_of::<Goal>() == 8);
+    assert!(size_of::<GoalEnd>() == 16 + GOAL_END_NAME_LEN && align_of::<GoalEnd>() == 8);
     assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
     assert!(size_of::<TimingHeader>() == 72 && align_of::<TimingHeader>() == 8);
     assert!(size_of::<IrFrame>() == 72 * 2 + 8 * 6 + 32 + 24 * 2 && align_of::<IrFrame>() == 8);
@@ -473,7 +498,7 @@ const _: () = {
     );
     assert!(size_of::<GridHeader>() == 8 + 4 * 4 + 8 * 8 && align_of::<GridHeader>() == 8);
     assert!(size_of::<GradientGrid>() == 88 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);
-    assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16);
+    assert!(size_of::<Task>() == 8 + 24 + 16 + 16 * MAX_PATH_POINTS + 16 + 8);
 };
 
 /// What a [`LearnEvent`] says. The planner sends the learning protocol's steps (in `learn`

@@ -17,6 +17,9 @@ impl ServiceNames {
     pub const TASK: &'static str = "agp/task";
     /// The goal of a live session the serving planner pursues (the supervisor publishes).
     pub const GOAL: &'static str = "agp/goal";
+    /// Goals the serving planner ended, when the supervisor that judges them is across a
+    /// bridge (the planner side's supervisor publishes, the bridge carries them).
+    pub const GOAL_ENDS: &'static str = "agp/goal_ends";
     pub const ACTIVE_EPOCH: &'static str = "agp/active_epoch";
     /// The event service physics blocks on: notified after a motor command or a reset.
     pub const PHYSICS_INBOX: &'static str = "agp/physics_inbox.ev";

@@ -272,7 +272,7 @@ fn write_recording(path: &Path) {
         out.add_channel(schema, topic, "agp-repr-c", &BTreeMap::new())
             .expect("a channel")
     };
-    let task_ch = channel(ServiceNames::TASK, "agp::Task.v1");
+    let task_ch = channel(ServiceNames::TASK, "agp::Task.v2");
     let grid_ch = channel(ServiceNames::GRIDS, "agp::GradientGrid.v2");
     let frame_ch = channel(ServiceNames::IR_FRAMES, "agp::IrFrame.v2");
     let est_ch = channel(ServiceNames::ESTIMATES, "agp::ObjectEstimate.v3");
@@ -301,6 +301,7 @@ fn write_recording(path: &Path) {
         max_pushes: 40,
         _pad: 0,
         seed: 7,
+        heading_tolerance_rad: 0.0,
     };
     write(&mut out, task_ch, t0, bytes_of(&task));
     let cell = 0.002;

@@ -149,6 +149,7 @@ fn place_task(goal: Pose2) -> Task {
         max_pushes: 1,
         _pad: 0,
         seed: 7,
+        heading_tolerance_rad: 0.0,
     }
 }
 

@@ -118,6 +118,11 @@ const INSTANCE_CHECK_EVERY: Duration = Duration::from_millis(250);
 const UPDATE_CONNECTIONS_EVERY: Duration = Duration::from_millis(20);
 /// Samples from the far end waiting for the in thread (a whole grid set and then some).
 const IN_QUEUE: usize = 1024;
+/// Unlatched messages (commands, resets, events) this side sent before the far end joined,
+/// kept for it: a planner that has its grids and first frame may command step 1 before the
+/// far end's hello has come back, and in lockstep a lost command stops the run. Past this
+/// many the oldest go (a far end that never joins is not owed a backlog).
+const PENDING_MAX: usize = 4096;
 
 struct Shared {
     stop: AtomicBool,
@@ -323,6 +328,9 @@ fn out_loop(
     let welcome_of = |nonce: u64| ZBytes::from(Header::Welcome { nonce }.encode());
     let mut served: Option<u64> = None;
     let mut live = false;
+    // (outgoing index, bytes) of unlatched messages drained before the far end joined.
+    let mut pending: std::collections::VecDeque<(usize, Vec<u8>)> =
+        std::collections::VecDeque::new();
     let mut active = shared.active_epoch.load(Ordering::Relaxed);
     let mut last_activity = Instant::now();
     let side = config.side;
@@ -356,6 +364,12 @@ fn out_loop(
                     Ok(())
                 })?;
             }
+            // Then what was sent before it joined, in the order it was drained.
+            for (i, bytes) in pending.drain(..) {
+                let o = &outgoing[i];
+                put(&bytes, &o.header)?;
+                shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
+            }
             put(&[], &welcome_of(nonce))?;
             served = Some(nonce);
             live = true;
@@ -367,9 +381,10 @@ fn out_loop(
             shared.active_epoch.store(active, Ordering::Relaxed);
         }
         let mut moved = 0;
-        for o in &mut outgoing {
+        for (index, o) in outgoing.iter_mut().enumerate() {
             let mut failed = None;
             let topic = o.topic;
+            let latched = topic.latch != Latch::None;
             let cache = &mut o.cache;
             let header = &o.header;
             let slot = o.slot;
@@ -404,6 +419,11 @@ fn out_loop(
                         }
                         Err(e) => failed = Some(e),
                     }
+                } else if !latched {
+                    if pending.len() >= PENDING_MAX {
+                        pending.pop_front();
+                    }
+                    pending.push_back((index, bytes.to_vec()));
                 }
             });
             match drained {

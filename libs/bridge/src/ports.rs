@@ -5,7 +5,8 @@ use core::mem::size_of;
 
 use agp_runtime::{AgpIpc, Instance, OpenError, Topic};
 use agp_shared_types::{
-    GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand, ObjectEstimate, Reset, Task,
+    Goal, GoalEnd, GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand, ObjectEstimate,
+    Reset, Task,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -36,6 +37,8 @@ unsafe impl Wire for LearnEvent {}
 unsafe impl Wire for Task {}
 unsafe impl Wire for Reset {}
 unsafe impl Wire for MotorCommand {}
+unsafe impl Wire for Goal {}
+unsafe impl Wire for GoalEnd {}
 
 /// How the receiving end changes the fields that belong to its own instance before it
 /// republishes a message: the epoch and token of commands and resets (the robot side's
@@ -210,6 +213,8 @@ pub(crate) fn out_port(
         "learn_reports" => open_out(instance, node, Instance::learn_reports, no_auth),
         "learn_events" => open_out(instance, node, Instance::learn_events, no_auth),
         "task" => open_out(instance, node, Instance::task, no_auth),
+        "goal" => open_out(instance, node, Instance::goal, no_auth),
+        "goal_ends" => open_out(instance, node, Instance::goal_ends, no_auth),
         "resets" => open_out(instance, node, Instance::resets, |r: &Reset| {
             Some(Auth {
                 epoch: r.epoch,
@@ -246,6 +251,8 @@ pub(crate) fn in_port(
         "learn_reports" => open_in(instance, node, Instance::learn_reports, keep),
         "learn_events" => open_in(instance, node, Instance::learn_events, keep),
         "task" => open_in(instance, node, Instance::task, keep),
+        "goal" => open_in(instance, node, Instance::goal, keep),
+        "goal_ends" => open_in(instance, node, Instance::goal_ends, keep),
         "resets" => open_in(instance, node, Instance::resets, |x: &mut Reset, r| {
             x.epoch = r.epoch;
             x.token = r.token;

@@ -75,18 +75,24 @@ pub struct BridgedTopic {
 /// of this list (frames before the estimates derived from them; the planner's events
 /// before the command that follows them), so the far end sees them in that order too.
 ///
-/// Not carried: ground truth (the judge runs beside physics), the goal and the active epoch
-/// (each instance's supervisor owns its own) and the control service (request-response,
-/// each supervisor answers for its own instance).
-pub const BRIDGED_TOPICS: [&str; 8] = [
+/// The goals of a live session cross too: the robot side's supervisor, which runs the judge
+/// beside physics, owns them; its `goal` goes to the serving planner, and the goals that
+/// planner ended come back as `goal_ends` (its own supervisor relays its `GoalDone`).
+///
+/// Not carried: ground truth (the judge runs beside physics), the active epoch (each
+/// instance's supervisor owns its own) and the control service (request-response, each
+/// supervisor answers for its own instance).
+pub const BRIDGED_TOPICS: [&str; 10] = [
     "grids",
     "ir_frames",
     "estimates",
     "learn_reports",
+    "goal",
     "learn_events",
     "task",
     "resets",
     "motor_commands",
+    "goal_ends",
 ];
 
 /// The description of topic `name` (one of [`BRIDGED_TOPICS`]).
@@ -96,10 +102,12 @@ pub fn bridged_topic(name: &str) -> Option<BridgedTopic> {
         "ir_frames" => (ServiceNames::IR_FRAMES, Side::Robot, Latch::Latest),
         "estimates" => (ServiceNames::ESTIMATES, Side::Robot, Latch::Latest),
         "learn_reports" => (ServiceNames::LEARN_REPORTS, Side::Robot, Latch::None),
+        "goal" => (ServiceNames::GOAL, Side::Robot, Latch::Latest),
         "learn_events" => (ServiceNames::LEARN_EVENTS, Side::Planner, Latch::None),
         "task" => (ServiceNames::TASK, Side::Planner, Latch::Latest),
         "resets" => (ServiceNames::RESETS, Side::Planner, Latch::None),
         "motor_commands" => (ServiceNames::MOTOR_COMMANDS, Side::Planner, Latch::None),
+        "goal_ends" => (ServiceNames::GOAL_ENDS, Side::Planner, Latch::None),
         _ => return None,
     };
     let spec = recorded_topics()
@@ -183,6 +191,8 @@ mod tests {
         assert_eq!(from("motor_commands"), Some(Side::Planner));
         assert_eq!(from("learn_events"), Some(Side::Planner));
         assert_eq!(from("task"), Some(Side::Planner));
+        assert_eq!(from("goal"), Some(Side::Robot));
+        assert_eq!(from("goal_ends"), Some(Side::Planner));
     }
 
     #[test]

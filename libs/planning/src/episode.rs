@@ -111,8 +111,13 @@ pub enum Task {
     /// The object's centroid at the goal's position, its orientation at the goal's
     /// (modulo the object's symmetry), world frame.
     Place { goal: Pose2 },
-    /// The centroid along this polyline (world frame, m) to its end.
-    Trajectory { path: Vec<DVec2> },
+    /// The centroid along this polyline (world frame, m) to its end; with
+    /// `keep_heading_rad`, the object's heading (its frame's x axis) kept to the path's
+    /// tangent within that much (rad) as far as the pushes allow.
+    Trajectory {
+        path: Vec<DVec2>,
+        keep_heading_rad: Option<f64>,
+    },
 }
 
 impl Task {
@@ -130,6 +135,8 @@ impl Task {
                         .iter()
                         .map(|p| DVec2::from_array(*p))
                         .collect(),
+                    keep_heading_rad: (msg.heading_tolerance_rad > 0.0)
+                        .then_some(msg.heading_tolerance_rad),
                 })
             }
             _ => None,
@@ -213,10 +220,9 @@ pub struct EpisodeConfig {
     /// and the push lengths tried (fractions of the learned push; a full push overshoots
     /// bends).
     pub path_push_fractions: Vec<f64>,
-    /// With `follow_path`: also keep the object's heading (its frame's x axis) to the
-    /// path's tangent within this (rad), each radian beyond costing
-    /// `heading_weight_m_per_rad` (m). A task that asks for the heading sets its own.
-    pub keep_heading_rad: Option<f64>,
+    /// With `follow_path`, when the task asks to keep the object's heading to the path's
+    /// tangent (`Task::Trajectory::keep_heading_rad`): each radian beyond its tolerance
+    /// costs this much (m).
     pub heading_weight_m_per_rad: f64,
     /// Stop when the estimate is within this fraction of the tolerance (the estimate has
     /// errors of its own; 1 stops at the tolerance)...
@@ -272,7 +278,6 @@ impl EpisodeConfig {
             steer_max_deg: 10.0,
             // Tuned on seeds 1-10 (agp bench trajectory --first-seed 1 --seeds 10).
             follow_path: true,
-            keep_heading_rad: None,
             path_push_fractions: vec![0.5, 0.25],
             heading_weight_m_per_rad: 1e-3 * 180.0 / std::f64::consts::PI,
             advance_m: 0.04,
@@ -357,7 +362,7 @@ impl Evaluation {
                     ep <= config.tolerance_m && eo <= config.tolerance_rad,
                 )
             }
-            Task::Trajectory { path } => {
+            Task::Trajectory { path, .. } => {
                 let end = path.last().copied().unwrap_or_default();
                 let ep = (DVec2::new(truth.x, truth.y) - end).length();
                 (ep, 0.0, ep <= config.tolerance_m)
@@ -449,7 +454,7 @@ pub fn drive_episode<W: World>(
     config: &EpisodeConfig,
 ) -> Result<EpisodeResult, EpisodeRunError> {
     let wall = Instant::now();
-    if let Task::Trajectory { path } = task
+    if let Task::Trajectory { path, .. } = task
         && path.len() < 2
     {
         return Err(EpisodeRunError::ShortPath);
@@ -866,7 +871,7 @@ impl<W: World> Episode<'_, '_, W> {
                 let done = near && (turned || matches!(self.brain, Brain::Baseline { .. }));
                 (g, done)
             }
-            Task::Trajectory { path } => {
+            Task::Trajectory { path, .. } => {
                 let end = path[path.len() - 1];
                 let target = lookahead_point(path, est.position(), self.run.config.lookahead_m);
                 (target, (est.position() - end).length() <= tol)
@@ -923,7 +928,10 @@ impl<W: World> Episode<'_, '_, W> {
                     planner
                 };
                 let along = match self.task {
-                    Task::Trajectory { path } if follow => {
+                    Task::Trajectory {
+                        path,
+                        keep_heading_rad,
+                    } if follow => {
                         let (s0, _) = path_projection(path, est.position());
                         let total: f64 = path.windows(2).map(|w| (w[1] - w[0]).length()).sum();
                         planner.plan_along(
@@ -934,7 +942,7 @@ impl<W: World> Episode<'_, '_, W> {
                                 track_weight: c.track_weight,
                                 progress_weight: c.progress_weight,
                                 push_fractions: &c.path_push_fractions,
-                                heading_tolerance_rad: c.keep_heading_rad,
+                                heading_tolerance_rad: *keep_heading_rad,
                                 heading_weight_m_per_rad: c.heading_weight_m_per_rad,
                             },
                         )

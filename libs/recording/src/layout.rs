@@ -5,7 +5,7 @@
 use core::mem::{align_of, offset_of, size_of};
 
 use agp_shared_types::{
-    ActiveEpoch, Goal, GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand,
+    ActiveEpoch, Goal, GoalEnd, GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand,
     ObjectEstimate, Reset, Task,
 };
 
@@ -191,6 +191,7 @@ pub(crate) fn task() -> Layout {
             max_pushes: "u32",
             _pad: "u32",
             seed: "u64",
+            heading_tolerance_rad: "f64",
         }),
         pose!(Task, goal),
     ])
@@ -208,6 +209,7 @@ pub(crate) fn goal() -> Layout {
             task.max_pushes: "u32",
             task._pad: "u32",
             task.seed: "u64",
+            task.heading_tolerance_rad: "f64",
         }),
         pose!(Goal, task.goal),
     ])
@@ -263,6 +265,14 @@ pub(crate) fn learn_report() -> Layout {
     })])
 }
 
+pub(crate) fn goal_end() -> Layout {
+    join(vec![layout!(GoalEnd {
+        id: "u64",
+        sim_time_ns: "u64",
+        end: "u8[32]",
+    })])
+}
+
 impl Layout {
     /// The schema text stored in the MCAP file: a header saying how to read the bytes, then
     /// one line per field, `offset size type name`.
@@ -300,6 +310,7 @@ mod tests {
             active_epoch(),
             learn_event(),
             learn_report(),
+            goal_end(),
         ]
     }
 

@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 
 use agp_runtime::{AgpIpc, Instance, OpenError, Topic};
 use agp_shared_types::{
-    ActiveEpoch, Goal, GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand,
+    ActiveEpoch, Goal, GoalEnd, GradientGrid, IrFrame, LearnEvent, LearnReport, MotorCommand,
     ObjectEstimate, Reset, Task, monotonic_ns, stage,
 };
 use iceoryx2::port::subscriber::Subscriber;
@@ -436,6 +436,14 @@ fn subscribe(instance: &Instance, node: &Node<AgpIpc>) -> Result<Vec<Box<dyn Dra
             Instance::learn_reports,
             no_stamp,
             |r| Some(r.seq),
+        )?,
+        open::<GoalEnd>(
+            instance,
+            node,
+            t[10].service,
+            Instance::goal_ends,
+            no_stamp,
+            no_counter,
         )?,
     ])
 }

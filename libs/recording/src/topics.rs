@@ -3,8 +3,8 @@
 use core::mem::size_of;
 
 use agp_shared_types::{
-    ActiveEpoch, Goal, GradientGrid, GridHeader, IrFrame, LearnEvent, LearnReport, MotorCommand,
-    ObjectEstimate, Pose2, Reset, ServiceNames, Task, TimingHeader,
+    ActiveEpoch, Goal, GoalEnd, GradientGrid, GridHeader, IrFrame, LearnEvent, LearnReport,
+    MotorCommand, ObjectEstimate, Pose2, Reset, ServiceNames, Task, TimingHeader,
 };
 
 use crate::layout::{self, Layout};
@@ -50,11 +50,12 @@ pub fn recorded_topics() -> [TopicSpec; TOPIC_COUNT] {
         spec(ServiceNames::ACTIVE_EPOCH, layout::active_epoch),
         spec(ServiceNames::LEARN_EVENTS, layout::learn_event),
         spec(ServiceNames::LEARN_REPORTS, layout::learn_report),
+        spec(ServiceNames::GOAL_ENDS, layout::goal_end),
     ]
 }
 
 /// How many topics a recording holds.
-pub const TOPIC_COUNT: usize = 10;
+pub const TOPIC_COUNT: usize = 11;
 
 /// A payload any bit pattern of whose size is a valid value: `#[repr(C)]`, made of
 /// integers, floats and arrays of them only (no `bool`, enum, reference or pointer), with
@@ -74,6 +75,7 @@ unsafe impl Plain for ObjectEstimate {}
 unsafe impl Plain for GridHeader {}
 unsafe impl Plain for Task {}
 unsafe impl Plain for Goal {}
+unsafe impl Plain for GoalEnd {}
 unsafe impl Plain for ActiveEpoch {}
 unsafe impl Plain for LearnEvent {}
 unsafe impl Plain for LearnReport {}

@@ -12,9 +12,9 @@ use iceoryx2::service::port_factory::subscriber::PortFactorySubscriber;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use agp_shared_types::{
-    ActiveEpoch, ControlRequest, ControlResponse, GRIDS_PER_ALPHA, Goal, GradientGrid, GroundTruth,
-    IrFrame, LearnEvent, LearnReport, MAX_GRID_ALPHAS, MotorCommand, ObjectEstimate, Reset,
-    ServiceNames, Task,
+    ActiveEpoch, ControlRequest, ControlResponse, GRIDS_PER_ALPHA, Goal, GoalEnd, GradientGrid,
+    GroundTruth, IrFrame, LearnEvent, LearnReport, MAX_GRID_ALPHAS, MotorCommand, ObjectEstimate,
+    Reset, ServiceNames, Task,
 };
 use iceoryx2::service::port_factory::request_response;
 
@@ -407,6 +407,16 @@ impl Instance {
             node,
             ServiceNames::LEARN_EVENTS,
             &ServiceNames::event_of(ServiceNames::IR_FRAMES),
+            Qos::learn(),
+        )
+    }
+
+    /// Goals ended across a bridge ([`GoalEnd`]), with an event service of their own.
+    pub fn goal_ends(&self, node: &Node<AgpIpc>) -> Result<Topic<GoalEnd>, OpenError> {
+        Topic::open(
+            node,
+            ServiceNames::GOAL_ENDS,
+            &ServiceNames::event_of(ServiceNames::GOAL_ENDS),
             Qos::learn(),
         )
     }

@@ -171,6 +171,9 @@ pub struct TaskSpec {
     /// Polyline of a trajectory task, metres (world frame): the file's `path_mm`, else
     /// 600 mm along +x from the object's start (benchmarks.md section 2).
     pub path: Vec<DVec2>,
+    /// A trajectory task's `keep_heading_deg`: the object's heading (its frame's x axis)
+    /// kept tangent to the path within this (rad). `None`: the heading is free.
+    pub keep_heading_rad: Option<f64>,
     pub max_pushes: u32,
     pub seed: u64,
 }
@@ -378,6 +381,8 @@ struct TaskFile {
     tolerance: Option<Spanned<ToleranceFile>>,
     #[serde(default)]
     path_mm: Option<Spanned<Vec<[f64; 2]>>>,
+    #[serde(default)]
+    keep_heading_deg: Option<Spanned<f64>>,
     #[serde(default)]
     max_pushes: Option<Spanned<i64>>,
     #[serde(default)]
@@ -600,6 +605,7 @@ impl Scenario {
                 tolerance_m: 0.01,
                 tolerance_rad: 10f64.to_radians(),
                 path: Vec::new(),
+                keep_heading_rad: None,
                 max_pushes: 150,
                 seed: 7,
             },
@@ -981,6 +987,25 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
         }
         None => Vec::new(),
     };
+    let keep_heading_rad = match &t.keep_heading_deg {
+        Some(h) if kind != TaskKind::Trajectory => {
+            return Err(err(
+                h.span(),
+                "`keep_heading_deg` belongs to a `trajectory` task".into(),
+            ));
+        }
+        Some(h) if *h.get_ref() > 0.0 && *h.get_ref() <= 180.0 => Some(h.get_ref().to_radians()),
+        Some(h) => {
+            return Err(err(
+                h.span(),
+                format!(
+                    "`keep_heading_deg` must be in (0, 180] degrees, got {}",
+                    h.get_ref()
+                ),
+            ));
+        }
+        None => None,
+    };
     let max_pushes = match &t.max_pushes {
         Some(m) if (1..=MAX_PUSHES).contains(m.get_ref()) => *m.get_ref() as u32,
         Some(m) => {
@@ -1010,6 +1035,7 @@ fn task(t: &TaskFile, err: &ErrFn) -> Result<TaskSpec, ScenarioLoadError> {
         tolerance_m,
         tolerance_rad,
         path,
+        keep_heading_rad,
         max_pushes,
         seed,
     })

@@ -36,6 +36,25 @@ seed = 7
 
 const ORIGIN: &str = "hostile.toml";
 
+#[test]
+fn a_trajectory_task_may_ask_to_keep_the_heading_and_a_placement_may_not() {
+    let kept = Scenario::parse(
+        &GOOD.replace("seed = 7", "seed = 7\nkeep_heading_deg = 15"),
+        ORIGIN,
+    )
+    .expect("a trajectory keeping its heading");
+    let h = kept.task.keep_heading_rad.expect("the heading asked");
+    assert!((h - 15f64.to_radians()).abs() < 1e-15);
+    let free = Scenario::parse(GOOD, ORIGIN).expect("the good file");
+    assert_eq!(free.task.keep_heading_rad, None);
+    let (line, msg) = refused(
+        "kind = \"trajectory\"\n",
+        "kind = \"place\"\nkeep_heading_deg = 15\n",
+    );
+    assert_eq!(line, 19, "{msg}");
+    assert!(msg.contains("belongs to a `trajectory` task"), "{msg}");
+}
+
 /// Parses GOOD with `from` replaced by `to`; the refusal's line and message.
 #[track_caller]
 fn refused(from: &str, to: &str) -> (usize, String) {
@@ -282,6 +301,18 @@ fn every_numeric_field_beyond_its_bounds_is_refused_naming_the_field_and_limit()
             &["max_pushes", "10000"],
         ),
         ("seed = 7", "seed = -7", 23, &["seed"]),
+        (
+            "seed = 7",
+            "seed = 7\nkeep_heading_deg = 0",
+            24,
+            &["keep_heading_deg", "(0, 180]"],
+        ),
+        (
+            "seed = 7",
+            "seed = 7\nkeep_heading_deg = 270",
+            24,
+            &["keep_heading_deg", "270"],
+        ),
     ];
     for &(from, to, want_line, words) in cases {
         let (line, msg) = refused(from, to);

@@ -86,6 +86,10 @@ struct Args {
     /// scenario's). `agp bench trajectory` hands each episode its path this way.
     #[arg(long, num_args = 2.., value_parser = parse_point, allow_hyphen_values = true)]
     path: Vec<[f64; 2]>,
+    /// Trajectory: keep the object's heading tangent to the path within this many degrees,
+    /// in (0, 180] (default: the scenario's `keep_heading_deg`, else the heading is free).
+    #[arg(long, value_name = "DEG", value_parser = parse_heading)]
+    keep_heading: Option<f64>,
     /// Place, trajectory: run the learning phase first when the AG file
     /// `<results>/<object>.ag` is missing (run the estimator with `--reuse`, which then
     /// learns; it publishes the saved gradients when the file is there).
@@ -200,6 +204,16 @@ fn parse_point(s: &str) -> Result<[f64; 2], String> {
     }
 }
 
+fn parse_heading(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 180.0 => Ok(v),
+        Ok(v) => Err(format!(
+            "a heading tolerance is in (0, 180] degrees, got {v}"
+        )),
+        Err(_) => Err(format!("`{s}` is not a number of degrees")),
+    }
+}
+
 fn parse_goal(s: &str) -> Result<Pose2, String> {
     let v: Vec<f64> = s
         .split(',')
@@ -294,15 +308,23 @@ fn run() -> Result<()> {
             let settings = task_mode::TaskSettings {
                 planner: args.planner,
                 task: match task_mode::task_of(&scenario, kind, args.goal) {
-                    agp_planning::Task::Trajectory { .. } if !args.path.is_empty() => {
-                        agp_planning::Task::Trajectory {
-                            path: args
-                                .path
+                    agp_planning::Task::Trajectory {
+                        path,
+                        keep_heading_rad,
+                    } => agp_planning::Task::Trajectory {
+                        path: if args.path.is_empty() {
+                            path
+                        } else {
+                            args.path
                                 .iter()
                                 .map(|p| glam::DVec2::from_array(*p))
-                                .collect(),
-                        }
-                    }
+                                .collect()
+                        },
+                        keep_heading_rad: args
+                            .keep_heading
+                            .map(f64::to_radians)
+                            .or(keep_heading_rad),
+                    },
                     task => task,
                 },
                 epoch: args.epoch,

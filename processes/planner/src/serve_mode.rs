@@ -43,7 +43,8 @@ pub fn run(
     let client = ControlClient::open(instance, &node, settings.timeout)
         .context("cannot reach the supervisor for the goals")?;
     println!(
-        "planner `{}`: serving the goals of `{}` (agp goal --instance {} --place X Y THETA)",
+        "planner `{}`: serving the goals of `{}` (agp goal --instance {} --place X Y THETA; \
+         across a bridge, on the instance that runs physics)",
         settings.planner,
         scenario.name,
         instance.name()

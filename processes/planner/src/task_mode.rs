@@ -163,6 +163,7 @@ pub fn task_of(scenario: &ScenarioBrief, kind: TaskKind, goal: Option<Pose2>) ->
     match kind {
         TaskKind::Trajectory => Task::Trajectory {
             path: scenario.task.path.clone(),
+            keep_heading_rad: scenario.task.keep_heading_rad,
         },
         _ => {
             let g = scenario.task.goal;
@@ -206,7 +207,7 @@ impl Session {
         scenario: &ScenarioBrief,
         settings: &TaskSettings,
     ) -> Result<Option<Self>> {
-        if let Task::Trajectory { path } = &settings.task
+        if let Task::Trajectory { path, .. } = &settings.task
             && path.len() > MAX_PATH_POINTS
         {
             bail!(
@@ -538,7 +539,17 @@ fn describe_task(task: &Task) -> String {
             goal.y * 1e3,
             goal.theta.to_degrees()
         ),
-        Task::Trajectory { path } => format!("push along a {}-point path", path.len()),
+        Task::Trajectory {
+            path,
+            keep_heading_rad,
+        } => match keep_heading_rad {
+            Some(h) => format!(
+                "push along a {}-point path, heading within {:.0} deg of its tangent",
+                path.len(),
+                h.to_degrees()
+            ),
+            None => format!("push along a {}-point path", path.len()),
+        },
     }
 }
 
@@ -581,11 +592,16 @@ impl TaskPublication {
             max_pushes: t.max_pushes,
             _pad: 0,
             seed: t.seed,
+            heading_tolerance_rad: 0.0,
         };
         match task {
             Task::Place { goal } => msg.goal = *goal,
-            Task::Trajectory { path } => {
+            Task::Trajectory {
+                path,
+                keep_heading_rad,
+            } => {
                 msg.kind = TaskKind::Trajectory as u32;
+                msg.heading_tolerance_rad = keep_heading_rad.unwrap_or(0.0);
                 msg.path_len = path.len().min(MAX_PATH_POINTS) as u32;
                 for (slot, p) in msg.path.iter_mut().zip(path.iter().copied()) {
                     *slot = DVec2::to_array(&p);

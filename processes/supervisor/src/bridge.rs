@@ -16,8 +16,9 @@ pub(crate) struct BridgeArgs {
     #[arg(long, env = "AGP_INSTANCE")]
     instance: String,
     /// `robot`: this instance runs physics and the estimator (it sends frames, estimates,
-    /// grids and learning reports, and takes commands, resets, the planner's events and the
-    /// task); `planner`: this instance runs the planner (the other way round).
+    /// grids, learning reports and a live session's goal, and takes commands, resets, the
+    /// planner's events, the task and the goals the planner ended); `planner`: this
+    /// instance runs the planner (the other way round).
     #[arg(long)]
     side: String,
     /// Listen for the far end on this TCP endpoint, e.g. `tcp/127.0.0.1:7447`.
@@ -27,8 +28,8 @@ pub(crate) struct BridgeArgs {
     #[arg(long)]
     connect: Option<String>,
     /// The topics carried, comma-separated (both ends must name the same): grids,
-    /// ir_frames, estimates, learn_reports, learn_events, task, resets, motor_commands, or
-    /// `all`.
+    /// ir_frames, estimates, learn_reports, goal, learn_events, task, resets,
+    /// motor_commands, goal_ends, or `all`.
     #[arg(long, default_value = "all")]
     topics: String,
     /// The Zenoh key prefix both ends share; two links on one Zenoh network keep apart

@@ -160,9 +160,10 @@ impl ControlPlane {
         log: &Log,
         waiting: &str,
         task: &TaskSpec,
+        robot_is_remote: bool,
     ) -> Result<Self> {
         let service = instance.create_control(node)?;
-        let goals = GoalBook::open(instance, node, task)?;
+        let goals = GoalBook::open(instance, node, task, robot_is_remote)?;
         let server = service
             .server_builder()
             .create()
@@ -245,6 +246,7 @@ impl ControlPlane {
     ) -> Option<RunEnd> {
         let mut end = None;
         self.goals.update_connections();
+        self.goals.take_relayed(judge, log);
         loop {
             let request = match self.server.receive() {
                 Ok(Some(r)) => r,

@@ -12,8 +12,12 @@ pub enum GoalSpec {
         y_mm: f64,
         theta_deg: f64,
     },
-    /// `--path X,Y X,Y ...`: the object's centroid pushed along this polyline.
-    Path { points_mm: Vec<[f64; 2]> },
+    /// `--path X,Y X,Y ...`: the object's centroid pushed along this polyline; with
+    /// `--keep-heading DEG`, its heading kept tangent to it within that.
+    Path {
+        points_mm: Vec<[f64; 2]>,
+        keep_heading_deg: Option<f64>,
+    },
 }
 
 /// Why a goal was refused.
@@ -27,6 +31,8 @@ pub enum GoalSpecError {
     LongPath(usize),
     #[error("every coordinate must be a finite number within 10 m of the origin, got {0}")]
     OutOfRange(f64),
+    #[error("a heading tolerance is in (0, 180] degrees, got {0}")]
+    BadHeading(f64),
 }
 
 /// Coordinates beyond this (mm) are refused: the arena is a few tens of centimetres.
@@ -41,8 +47,13 @@ fn checked(v: f64) -> Result<f64, GoalSpecError> {
 }
 
 impl GoalSpec {
-    /// `X,Y` words of `--path`.
-    pub fn path(words: &[String]) -> Result<Self, GoalSpecError> {
+    /// `X,Y` words of `--path`, and `--keep-heading`'s degrees.
+    pub fn path(words: &[String], keep_heading_deg: Option<f64>) -> Result<Self, GoalSpecError> {
+        if let Some(h) = keep_heading_deg
+            && !(h > 0.0 && h <= 180.0)
+        {
+            return Err(GoalSpecError::BadHeading(h));
+        }
         if words.len() < 2 {
             return Err(GoalSpecError::ShortPath(words.len()));
         }
@@ -63,7 +74,10 @@ impl GoalSpec {
                 Ok([checked(parse(x)?)?, checked(parse(y)?)?])
             })
             .collect::<Result<Vec<_>, GoalSpecError>>()?;
-        Ok(Self::Path { points_mm })
+        Ok(Self::Path {
+            points_mm,
+            keep_heading_deg,
+        })
     }
 
     /// `--place X Y THETA`.
@@ -88,8 +102,12 @@ impl GoalSpec {
                 goal.task.kind = TaskKind::Place as u32;
                 goal.task.goal = Pose2::new(x_mm * 1e-3, y_mm * 1e-3, theta_deg.to_radians());
             }
-            Self::Path { points_mm } => {
+            Self::Path {
+                points_mm,
+                keep_heading_deg,
+            } => {
                 goal.task.kind = TaskKind::Trajectory as u32;
+                goal.task.heading_tolerance_rad = keep_heading_deg.map_or(0.0, f64::to_radians);
                 goal.task.path_len = points_mm.len() as u32;
                 for (slot, p) in goal.task.path.iter_mut().zip(points_mm) {
                     *slot = [p[0] * 1e-3, p[1] * 1e-3];
@@ -121,6 +139,12 @@ pub fn check_goal(goal: &Goal) -> Result<(), String> {
             if !t.path[..n].iter().flatten().all(|&v| finite(v)) {
                 return Err("a path point is not finite or lies beyond 10 m".to_owned());
             }
+            let h = t.heading_tolerance_rad;
+            if !(h.is_finite() && (0.0..=std::f64::consts::PI).contains(&h)) {
+                return Err(format!(
+                    "the heading tolerance must be 0 (none) to 180 degrees, got {h} rad"
+                ));
+            }
         }
         k => return Err(format!("unknown task kind {k}")),
     }
@@ -147,35 +171,47 @@ mod tests {
 
     #[test]
     fn a_path_goal_keeps_its_points_in_order() {
-        let g = GoalSpec::path(&words(&["0,0", "100, 20", "-5.5,300"]))
+        let g = GoalSpec::path(&words(&["0,0", "100, 20", "-5.5,300"]), None)
             .unwrap()
             .to_goal();
         assert_eq!(g.task.kind, TaskKind::Trajectory as u32);
         assert_eq!(g.task.path_len, 3);
         assert_eq!(g.task.path[1], [0.1, 0.02]);
         assert_eq!(g.task.path[2], [-0.0055, 0.3]);
+        assert_eq!(g.task.heading_tolerance_rad, 0.0, "the heading is free");
         assert_eq!(check_goal(&g), Ok(()));
+        let kept = GoalSpec::path(&words(&["0,0", "100,0"]), Some(15.0))
+            .unwrap()
+            .to_goal();
+        assert!((kept.task.heading_tolerance_rad - 15f64.to_radians()).abs() < 1e-15);
+        assert_eq!(check_goal(&kept), Ok(()));
     }
 
     #[test]
     fn bad_goals_are_refused_with_what_is_wrong() {
         assert_eq!(
-            GoalSpec::path(&words(&["0,0"])),
+            GoalSpec::path(&words(&["0,0"]), None),
             Err(GoalSpecError::ShortPath(1))
         );
         assert_eq!(
-            GoalSpec::path(&words(&["0,0", "12"])),
+            GoalSpec::path(&words(&["0,0", "12"]), None),
             Err(GoalSpecError::BadPoint("12".into()))
         );
         assert_eq!(
-            GoalSpec::path(&words(&["0,0", "1,x"])),
+            GoalSpec::path(&words(&["0,0", "1,x"]), None),
             Err(GoalSpecError::BadPoint("1,x".into()))
         );
         let long: Vec<String> = (0..=MAX_PATH_POINTS).map(|i| format!("{i},0")).collect();
         assert_eq!(
-            GoalSpec::path(&long),
+            GoalSpec::path(&long, None),
             Err(GoalSpecError::LongPath(MAX_PATH_POINTS + 1))
         );
+        for h in [0.0, -5.0, 181.0, f64::NAN] {
+            assert!(matches!(
+                GoalSpec::path(&words(&["0,0", "1,1"]), Some(h)),
+                Err(GoalSpecError::BadHeading(_))
+            ));
+        }
         assert!(matches!(
             GoalSpec::place(f64::NAN, 0.0, 0.0),
             Err(GoalSpecError::OutOfRange(_))
@@ -191,10 +227,15 @@ mod tests {
         let mut g = GoalSpec::place(0.0, 0.0, 0.0).unwrap().to_goal();
         g.task.kind = 7;
         assert!(check_goal(&g).is_err());
-        let mut g = GoalSpec::path(&words(&["0,0", "1,1"])).unwrap().to_goal();
+        let mut g = GoalSpec::path(&words(&["0,0", "1,1"]), None)
+            .unwrap()
+            .to_goal();
         g.task.path_len = 40;
         assert!(check_goal(&g).is_err());
         g.task.path_len = 2;
+        g.task.heading_tolerance_rad = -0.1;
+        assert!(check_goal(&g).is_err());
+        g.task.heading_tolerance_rad = 0.0;
         g.task.path[1][0] = f64::INFINITY;
         assert!(check_goal(&g).is_err());
     }

@@ -3,6 +3,11 @@
 //! (`agp-planner --mode serve`) pursues it and says when it ended (`GoalDone`), and the
 //! judge scores it by ground truth before the next one goes out. A planner that starts or
 //! is swapped in takes the goal under way from the topic's history.
+//!
+//! Across a bridge the supervisor of the robot side (physics, the estimator and the judge)
+//! owns the goals: the bridge carries its `goal` to the far instance, whose supervisor
+//! takes its serving planner's `GoalDone` and relays it on `goal_ends`, which the bridge
+//! carries back; this supervisor scores a relayed end as its own planner's.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -12,12 +17,13 @@ use agp_harness::evaluation::{RunJudge, RunVerdict};
 use agp_planning::Task as PlannerTask;
 use agp_runtime::{AgpIpc, Instance, Topic};
 use agp_shared_types::{
-    ControlResponse, Goal, GoalState, GoalStatus, MAX_STATUS_GOALS, Pose2, TaskKind, read_str,
-    write_str,
+    ControlResponse, Goal, GoalEnd, GoalState, GoalStatus, MAX_STATUS_GOALS, Pose2, TaskKind,
+    read_str, write_str,
 };
 use agp_world::TaskSpec;
 use anyhow::{Result, anyhow};
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::Node;
 
@@ -29,10 +35,27 @@ const JUDGE_TIMEOUT: Duration = Duration::from_secs(10);
 /// Goals kept for status replies and the session's JSON (the oldest are dropped past it).
 const MAX_KEPT_GOALS: usize = 1024;
 
+/// Where the goals of this instance's planner come from.
+enum Source {
+    /// This supervisor owns them: it publishes the one pursued and takes the ends, from its
+    /// own planner's `GoalDone` or relayed from a far one on `goal_ends`.
+    Own {
+        publisher: Publisher<AgpIpc, Goal, ()>,
+        _topic: Topic<Goal>,
+        ends: Subscriber<AgpIpc, GoalEnd, ()>,
+        _ends_topic: Topic<GoalEnd>,
+    },
+    /// The robot runs under another supervisor, which owns them (the bridge brings its
+    /// `goal`): this one relays its planner's ends there on `goal_ends`.
+    Relay {
+        ends: Publisher<AgpIpc, GoalEnd, ()>,
+        _topic: Topic<GoalEnd>,
+    },
+}
+
 /// The session's goals: queued, pursued, done.
 pub(crate) struct GoalBook {
-    publisher: Publisher<AgpIpc, Goal, ()>,
-    _topic: Topic<Goal>,
+    source: Source,
     /// Tolerances, push limit and seed of every goal: the session scenario's.
     spec: TaskSpec,
     queued: VecDeque<Goal>,
@@ -45,17 +68,43 @@ pub(crate) struct GoalBook {
 
 impl GoalBook {
     /// Opens the goal topic (owned by the supervisor, so it outlives every planner) and
-    /// publishes "no goal".
-    pub(crate) fn open(instance: &Instance, node: &Node<AgpIpc>, spec: &TaskSpec) -> Result<Self> {
-        let topic = instance.goal(node)?;
-        let publisher = topic
-            .data
-            .publisher_builder()
-            .create()
-            .map_err(|e| anyhow!("cannot create the goal publisher: {e:?}"))?;
+    /// publishes "no goal"; or, when `relay` (the robot runs under another supervisor), the
+    /// `goal_ends` publisher only, leaving the goal topic to the bridge.
+    pub(crate) fn open(
+        instance: &Instance,
+        node: &Node<AgpIpc>,
+        spec: &TaskSpec,
+        relay: bool,
+    ) -> Result<Self> {
+        let ends_topic = instance.goal_ends(node)?;
+        let source = if relay {
+            Source::Relay {
+                ends: ends_topic
+                    .data
+                    .publisher_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot create the goal-end publisher: {e:?}"))?,
+                _topic: ends_topic,
+            }
+        } else {
+            let topic = instance.goal(node)?;
+            Source::Own {
+                publisher: topic
+                    .data
+                    .publisher_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot create the goal publisher: {e:?}"))?,
+                _topic: topic,
+                ends: ends_topic
+                    .data
+                    .subscriber_builder()
+                    .create()
+                    .map_err(|e| anyhow!("cannot subscribe to the goal ends: {e:?}"))?,
+                _ends_topic: ends_topic,
+            }
+        };
         let book = Self {
-            publisher,
-            _topic: topic,
+            source,
             spec: spec.clone(),
             queued: VecDeque::new(),
             statuses: VecDeque::new(),
@@ -67,8 +116,10 @@ impl GoalBook {
     }
 
     fn publish(&self, goal: &Goal) -> Result<()> {
-        let sample = self
-            .publisher
+        let Source::Own { publisher, .. } = &self.source else {
+            return Ok(());
+        };
+        let sample = publisher
             .loan_uninit()
             .map_err(|e| anyhow!("cannot loan a goal sample: {e:?}"))?;
         sample
@@ -82,12 +133,48 @@ impl GoalBook {
     /// publisher gives its history to a new subscriber only when it sends or updates its
     /// connections): a planner swapped in or restarted takes the goal on from there.
     pub(crate) fn update_connections(&self) {
-        let _ = self.publisher.update_connections();
+        if let Source::Own { publisher, .. } = &self.source {
+            let _ = publisher.update_connections();
+        }
+    }
+
+    /// Scores the goals a far planner ended, relayed through the bridge on `goal_ends`, as
+    /// [`GoalBook::done`] scores this instance's own planner's.
+    pub(crate) fn take_relayed(&mut self, judge: &RunJudge, log: &Log) {
+        loop {
+            let end = match &self.source {
+                Source::Own { ends, .. } => match ends.receive() {
+                    Ok(Some(e)) => *e,
+                    Ok(None) => return,
+                    Err(e) => {
+                        log.note(format_args!("cannot receive a relayed goal end: {e:?}"));
+                        return;
+                    }
+                },
+                Source::Relay { .. } => return,
+            };
+            let how = read_str(&end.end);
+            let sim_time_s = end.sim_time_ns as f64 * 1e-9;
+            if let Err(why) = self.done(end.id, &how, sim_time_s, judge, log) {
+                log.note(format_args!(
+                    "the far planner's end of goal {} was not taken: {why}",
+                    end.id
+                ));
+            }
+        }
     }
 
     /// Queues `goal` (checked already); returns its id. It goes out at once when no goal is
     /// pursued.
     pub(crate) fn queue(&mut self, mut goal: Goal, log: &Log) -> Result<u64, String> {
+        if matches!(self.source, Source::Relay { .. }) {
+            return Err(
+                "the robot of this instance runs under another supervisor, which owns \
+                 the session's goals and judges them: queue them with `agp goal --instance` \
+                 naming that supervisor's instance"
+                    .to_owned(),
+            );
+        }
         let id = self.next_id;
         self.next_id += 1;
         goal.id = id;
@@ -156,6 +243,20 @@ impl GoalBook {
         judge: &RunJudge,
         log: &Log,
     ) -> Result<(), String> {
+        if let Source::Relay { ends, .. } = &self.source {
+            let mut relayed = GoalEnd {
+                id,
+                sim_time_ns: (sim_time_s.max(0.0) * 1e9) as u64,
+                ..GoalEnd::default()
+            };
+            write_str(&mut relayed.end, end);
+            ends.send_copy(relayed)
+                .map_err(|e| format!("cannot relay the end of goal {id}: {e:?}"))?;
+            log.note(format_args!(
+                "goal {id} ended `{end}`: relayed to the robot side's supervisor, which judges it"
+            ));
+            return Ok(());
+        }
         if self.current != Some(id) {
             return Err(match self.current {
                 Some(c) => format!("goal {id} is not the one pursued (goal {c} is)"),

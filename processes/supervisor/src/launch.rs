@@ -502,6 +502,20 @@ fn line_at(text: &str, offset: usize) -> usize {
 }
 
 impl LaunchConfig {
+    /// Whether physics and the estimator run under another supervisor, reached through this
+    /// instance's bridge (a `remote = { role = "robot", ... }` process, or an `agp bridge
+    /// --side planner` written out): that supervisor runs the judge beside physics and owns
+    /// a live session's goals, and this one relays the goals its planner ends to it.
+    pub fn robot_is_remote(&self) -> bool {
+        self.processes.iter().any(|p| {
+            p.exec.file_name().is_some_and(|n| n == "agp")
+                && p.args.first().is_some_and(|a| a == "bridge")
+                && p.args
+                    .windows(2)
+                    .any(|w| w[0] == "--side" && w[1] == "planner")
+        })
+    }
+
     /// Reads and validates the launch file at `path`: a regular file (a FIFO or a link to
     /// a device is refused without blocking) of at most
     /// [`agp_world::MAX_CONFIG_FILE_BYTES`].
@@ -1802,6 +1816,8 @@ stop_grace_ms = 500
             "agp",
         ];
         assert_eq!(planner.args, expected);
+        // Physics runs here: this supervisor owns the goals.
+        assert!(!config.robot_is_remote());
         let text = REMOTE.replace(
             "role = \"planner\", listen = \"tcp/127.0.0.1:7447\"",
             "role = \"robot\", connect = \"tcp/127.0.0.1:7447\", topics = [\"ir_frames\", \"motor_commands\"], link = \"lab2\"",
@@ -1819,6 +1835,8 @@ stop_grace_ms = 500
             "lab2",
         ];
         assert_eq!(config.processes[1].args, expected);
+        // Physics runs under the far supervisor, which owns the goals.
+        assert!(config.robot_is_remote());
     }
 
     #[test]

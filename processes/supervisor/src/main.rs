@@ -163,6 +163,10 @@ struct GoalArgs {
     /// Push the object's centroid along this path: 2 to 32 points X,Y in millimetres.
     #[arg(long, num_args = 2.., value_name = "X,Y", allow_hyphen_values = true)]
     path: Option<Vec<String>>,
+    /// With --path: keep the object's heading (its frame's x axis) tangent to the path
+    /// within DEG degrees, in (0, 180]; the affordance planner weighs it in every push.
+    #[arg(long, value_name = "DEG", requires = "path")]
+    keep_heading: Option<f64>,
     #[command(flatten)]
     target: control::InstanceArg,
     /// Print JSON: the goal's id and the goals so far.
@@ -466,7 +470,7 @@ fn status(args: &StatusArgs) -> Result<u8> {
 fn goal(args: &GoalArgs) -> Result<u8> {
     let spec = match (&args.place, &args.path) {
         (Some(p), _) => GoalSpec::place(p[0], p[1], p[2]),
-        (None, Some(words)) => GoalSpec::path(words),
+        (None, Some(words)) => GoalSpec::path(words, args.keep_heading),
         (None, None) => unreachable!("clap requires --place or --path"),
     }
     .map_err(|e| anyhow::anyhow!("{e}"))?;

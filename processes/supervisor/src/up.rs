@@ -232,7 +232,14 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     };
 
     let waiting = config.waiting(WaitStrategy::from_env_checked().ok().flatten());
-    let mut control = match ControlPlane::open(&instance, &node, &log, &waiting, &scenario.task) {
+    let mut control = match ControlPlane::open(
+        &instance,
+        &node,
+        &log,
+        &waiting,
+        &scenario.task,
+        config.robot_is_remote(),
+    ) {
         Ok(c) => c,
         Err(e) => {
             drop(services);

@@ -70,7 +70,10 @@ fn main() -> anyhow::Result<()> {
                     seed: config.seed + seed,
                     ..config.clone()
                 };
-                let task = Task::Trajectory { path: path.clone() };
+                let task = Task::Trajectory {
+                    path: path.clone(),
+                    keep_heading_rad: None,
+                };
                 let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &cfg)?;
                 let judged = r
                     .evaluation

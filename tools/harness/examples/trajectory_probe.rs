@@ -55,9 +55,7 @@ fn main() -> anyhow::Result<()> {
     if let Some(v) = env("ADV") {
         config.advance_m = v;
     }
-    if let Some(v) = env("HEAD") {
-        config.keep_heading_rad = Some(v.to_radians());
-    }
+    let keep_heading_rad = env("HEAD").map(f64::to_radians);
     if let Some(v) = env("HEADW") {
         config.heading_weight_m_per_rad = v * 1e-3 * 180.0 / std::f64::consts::PI;
     }
@@ -84,7 +82,10 @@ fn main() -> anyhow::Result<()> {
             seed,
             ..config.clone()
         };
-        let task = Task::Trajectory { path: path.clone() };
+        let task = Task::Trajectory {
+            path: path.clone(),
+            keep_heading_rad,
+        };
         let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &cfg).ok()?;
         let e = r.evaluation?;
         let poses: Vec<_> = e.samples.iter().map(|s| s.pose).collect();

@@ -87,6 +87,7 @@ fn run_seed(args: &BenchPaperArgs, seed: u64, dir: &Path) -> Result<Value> {
         // The paper's 600 mm line and the bent paths of the set (task_goals.rs).
         paths: NamedPath::SET.to_vec(),
         ag: ag(TRAJECTORY_OBJECT),
+        keep_heading: None,
         seeds: SeedArgs::one(seed),
         in_process: args.in_process,
         json: Some(dir.join("trajectory.json")),

@@ -55,6 +55,12 @@ pub struct BenchTrajectoryArgs {
     /// learned first with `agp bench learn` when missing).
     #[arg(long)]
     pub ag: Option<PathBuf>,
+    /// Ask every path's task to keep the object's heading tangent to the path within this
+    /// many degrees (the affordance planner weighs it in each push it chooses; the baseline
+    /// cannot turn the object and ignores it). `heading_within_15_deg` reports how far
+    /// each planner kept it. Default: the scenario's `keep_heading_deg`, else free.
+    #[arg(long, value_name = "DEG", value_parser = heading_deg)]
+    pub keep_heading: Option<f64>,
     #[command(flatten)]
     pub seeds: SeedArgs,
     /// Step the physics library in-process instead of running the pipeline's processes.
@@ -77,11 +83,26 @@ impl Default for BenchTrajectoryArgs {
             scenario: "lshape".into(),
             paths: Vec::new(),
             ag: None,
+            keep_heading: None,
             seeds: SeedArgs::default(),
             in_process: false,
             json: None,
             plot: None,
         }
+    }
+}
+
+/// A heading tolerance in degrees, in (0, 180].
+fn heading_deg(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of degrees"))?;
+    if v > 0.0 && v <= 180.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "a heading tolerance is in (0, 180] degrees, got {v}"
+        ))
     }
 }
 
@@ -349,6 +370,10 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
     let all_seeds = args.seeds.all();
     let seeds = args.seeds.mine();
     let base = EpisodeConfig::for_task(&scenario.task);
+    let keep_heading_rad = args
+        .keep_heading
+        .map(f64::to_radians)
+        .or(scenario.task.keep_heading_rad);
     eprintln!(
         "bench trajectory: scenario `{}`, paths {}, seeds {}{}; {note}",
         scenario.name,
@@ -393,6 +418,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
                 };
                 let task = Task::Trajectory {
                     path: points.clone(),
+                    keep_heading_rad,
                 };
                 let r = runner
                     .episode(planner, &task, &config)

@@ -392,7 +392,7 @@ fn watch(
             }
             *task = Task::from_message(&t);
             truth.follow_path(match task {
-                Some(Task::Trajectory { path }) => Some(path),
+                Some(Task::Trajectory { path, .. }) => Some(path),
                 _ => None,
             });
         }
@@ -427,7 +427,7 @@ fn verdict(
     };
     estimates.drain(true);
     truth.follow_path(match &task {
-        Task::Trajectory { path } => Some(path),
+        Task::Trajectory { path, .. } => Some(path),
         Task::Place { .. } => None,
     });
     let Some(last) = truth.finish()? else {
@@ -517,7 +517,7 @@ pub fn report(
         .map_err(|err| anyhow!("cannot write {}: {err}", json_path.display()))?;
     let overlay = match &verdict.task {
         Task::Place { goal } => crate::bench_tasks::Overlay::Goal(*goal),
-        Task::Trajectory { path } => crate::bench_tasks::Overlay::Path(path),
+        Task::Trajectory { path, .. } => crate::bench_tasks::Overlay::Path(path),
     };
     crate::bench_tasks::plot_runs(
         &plot_path,
@@ -605,7 +605,10 @@ mod tests {
                 goal: Pose2::new(2.0, 0.0, 0.3),
             },
             Task::Place { goal: last.object },
-            Task::Trajectory { path: path.clone() },
+            Task::Trajectory {
+                path: path.clone(),
+                keep_heading_rad: None,
+            },
         ] {
             let bounded = Evaluation::judge(&task, last.object, order, &config, Vec::new());
             let whole = Evaluation::judge(&task, last.object, order, &config, full.clone());

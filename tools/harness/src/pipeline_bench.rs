@@ -156,9 +156,15 @@ impl PipelineBench {
                     goal.theta.to_degrees()
                 ));
             }
-            Task::Trajectory { path } => {
+            Task::Trajectory {
+                path,
+                keep_heading_rad,
+            } => {
                 cmd.args(["--mode", "trajectory", "--path"])
                     .args(path.iter().map(|p| format!("{},{}", p.x * 1e3, p.y * 1e3)));
+                if let Some(h) = keep_heading_rad {
+                    cmd.arg("--keep-heading").arg(format!("{}", h.to_degrees()));
+                }
             }
         }
         let wall = Instant::now();

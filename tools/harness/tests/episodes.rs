@@ -142,7 +142,10 @@ fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does
     let (scenario, robot, ag) = setup("lshape");
     let path = scenario.task.path.clone();
     let config = EpisodeConfig::for_task(&scenario.task);
-    let task = Task::Trajectory { path: path.clone() };
+    let task = Task::Trajectory {
+        path: path.clone(),
+        keep_heading_rad: None,
+    };
     let mut errors = Vec::new();
     for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
         let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
@@ -184,7 +187,10 @@ fn around_a_90_degree_bend_the_gradients_pushes_keep_the_l_nearer_than_the_basel
     let (scenario, robot, ag) = setup("lshape");
     let path = agp_harness::task_goals::NamedPath::Bend90.points(&scenario);
     let config = EpisodeConfig::for_task(&scenario.task);
-    let task = Task::Trajectory { path: path.clone() };
+    let task = Task::Trajectory {
+        path: path.clone(),
+        keep_heading_rad: None,
+    };
     let mut errors = Vec::new();
     for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
         let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
