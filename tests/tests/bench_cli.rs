@@ -110,6 +110,8 @@ fn bench_trajectory_compares_both_planners_on_each_path_of_one_seed() {
             "7",
             "--paths",
             "straight,bend90",
+            "--keep-heading",
+            "15",
             "--json",
             "t.json",
             "--plot",
@@ -123,6 +125,9 @@ fn bench_trajectory_compares_both_planners_on_each_path_of_one_seed() {
     assert_eq!(v["physics"], "pipeline");
     assert_eq!(v["seed"], 7);
     assert_eq!(v["seeds"], serde_json::json!([7]));
+    // The heading the tasks asked for reached the planner processes (they refuse an
+    // argument they do not know), and the run says which it asked.
+    assert_eq!(v["keep_heading_deg"], 15.0);
     let a = num(&v["planners"]["affordance"], "mean_error_mm");
     let b = num(&v["planners"]["baseline"], "mean_error_mm");
     assert!(a > 0.0 && b > 0.0, "{v}");

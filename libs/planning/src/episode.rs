@@ -1487,6 +1487,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_trajectory_message_carries_its_heading_tolerance_and_zero_means_none() {
+        let mut msg = agp_shared_types::Goal::default().task;
+        msg.kind = agp_shared_types::TaskKind::Trajectory as u32;
+        msg.path_len = 2;
+        msg.path[1] = [0.6, 0.0];
+        msg.heading_tolerance_rad = 15f64.to_radians();
+        match Task::from_message(&msg) {
+            Some(Task::Trajectory {
+                path,
+                keep_heading_rad,
+            }) => {
+                assert_eq!(path, [DVec2::ZERO, DVec2::new(0.6, 0.0)]);
+                assert_eq!(keep_heading_rad, Some(15f64.to_radians()));
+            }
+            other => panic!("{other:?}"),
+        }
+        msg.heading_tolerance_rad = 0.0;
+        assert!(matches!(
+            Task::from_message(&msg),
+            Some(Task::Trajectory {
+                keep_heading_rad: None,
+                ..
+            })
+        ));
+    }
+
+    #[test]
     fn the_lookahead_point_runs_along_the_path_and_stops_at_its_end() {
         let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.3)];
         let p = lookahead_point(&path, DVec2::new(0.1, 0.02), 0.05);

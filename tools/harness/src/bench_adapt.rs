@@ -1,8 +1,10 @@
 //! `agp bench adapt`: an affordance gradient that keeps learning, against a frozen one,
 //! when the world changes under it.
 //!
-//! The gradient learned at the scenario's floor friction (the learning benchmark's AG
-//! file of the object) places the object at `--warmup` goals in the scenario's world, the
+//! At each seed, the gradient learned at the scenario's floor friction (by default the
+//! learning benchmark's AG file of the object learned at that seed,
+//! `results/learn/seed-<S>/<object>.ag`, learned first when missing; `--ag FILE` gives one
+//! file for every seed) places the object at `--warmup` goals in the scenario's world, the
 //! pre-change level of its prediction error; then the world changes (`--friction`, and/or
 //! `--mass-kg`, applied by physics as a scenario's `[[world_change]]` is) and it places
 //! the object at `--episodes` more goals. Twice, on the same goals and seed: with the
@@ -17,11 +19,17 @@
 //! the pushes after the change until the median displacement error of the next
 //! [`RECOVERY_WINDOW`] pushes is within [`RECOVERY_FACTOR`] x the pre-change median.
 //!
+//! Seeds as every benchmark has them ([`SeedArgs`]: `--seeds N` from `--first-seed`,
+//! `--seed S`, `--shard I/N`): each seed writes a one-seed document (the figures above,
+//! every episode and push), and the run's document is assembled from them by the same
+//! code [`merge`] (what `agp bench merge` calls on a sharded run's parts) runs: each
+//! figure the mean over the seeds with its spread, `seeds`, `per_seed`.
+//!
 //! In process: the physics library and the estimator's tracker beside the planner (the
 //! `--in-process` world of the other benchmarks); the pipeline carries the same learning
 //! (the estimator republishes the grids, the planner's grid link takes them).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use agp_affordance::{AffordanceGradient, PushOutcome, PushPredictor, learned_border_radius_m};
@@ -34,9 +42,16 @@ use agp_shared_types::{LearnEvent, LearnEventKind, ObjectEstimate, Pose2};
 use agp_world::{Pose, RobotDescription, Scenario, WorldChange};
 use anyhow::{Context, Result, bail};
 use glam::DVec2;
-use serde_json::json;
+use serde_json::{Map, Value, json};
 
+use crate::bench_learn::{self, BenchLearnArgs};
+use crate::bench_tasks::write_json;
 use crate::in_process::InProcessWorld;
+use crate::seeds::{
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
+    number_at, seed_list, spread_at,
+};
+use crate::side_by_side::side_by_side;
 use crate::task_goals::{median, place_goals};
 
 /// Pushes whose median error must be back within [`RECOVERY_FACTOR`] of the pre-change
@@ -51,8 +66,9 @@ pub struct BenchAdaptArgs {
     /// Built-in scenario or scenario file: the object, its floor friction before the change.
     #[arg(long, default_value = "triangle")]
     pub scenario: String,
-    /// The AG file learned at the scenario's friction (default: the learning benchmark's,
-    /// `results/learn/<name>.ag`).
+    /// The AG file learned at the scenario's friction, for every seed (default: each
+    /// seed's own, the learning benchmark's `results/learn/seed-<S>/<object>.ag`, learned
+    /// at that seed first when missing).
     #[arg(long)]
     pub ag: Option<PathBuf>,
     /// Floor friction after the change (0.25); with `--mass-kg` both change.
@@ -67,15 +83,33 @@ pub struct BenchAdaptArgs {
     /// Placements after the change.
     #[arg(long, default_value_t = 20)]
     pub episodes: usize,
-    /// Seed of the goals and of the sensor noise.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    /// Seeds of the goals, the sensor noise and (without `--ag`) the learned AG: each seed
+    /// its own goals and gradient, the same for both conditions.
+    #[command(flatten)]
+    pub seeds: SeedArgs,
     /// Pushes per placement at most.
     #[arg(long, default_value_t = 60)]
     pub max_pushes: u32,
-    /// Write the JSON report here (`-`: stdout).
+    /// Write the JSON report here (`-`: stdout): per condition each figure's mean over the
+    /// seeds with its spread, every seed's own document in `per_seed`.
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+impl Default for BenchAdaptArgs {
+    fn default() -> Self {
+        Self {
+            scenario: "triangle".into(),
+            ag: None,
+            friction: None,
+            mass_kg: None,
+            warmup: 3,
+            episodes: 20,
+            seeds: SeedArgs::default(),
+            max_pushes: 60,
+            json: None,
+        }
+    }
 }
 
 /// One push, as the judge saw it.
@@ -343,21 +377,43 @@ pub fn run_condition(setup: &AdaptSetup<'_>, online: OnlineLearningConfig) -> Re
     Ok(run)
 }
 
-fn condition_json(run: &ConditionRun) -> serde_json::Value {
-    let num = |x: f64| if x.is_finite() { json!(x) } else { json!(null) };
+/// A condition: its name in the report, and the tracker's online learning in it.
+type Condition = (&'static str, fn() -> OnlineLearningConfig);
+
+/// The two conditions every seed runs, in report order: the gradient frozen, and learning
+/// on from every push.
+const CONDITIONS: [Condition; 2] = [
+    ("frozen", OnlineLearningConfig::default),
+    ("updating", OnlineLearningConfig::updating),
+];
+
+/// The figures of a condition that are one number per seed: aggregated as their mean over
+/// the seeds, with their spread. A seed whose gradient never recovered has a null
+/// `pushes_to_recover`: left out of its mean and counted in its spread's `missing`.
+const FIGURES: [&str; 6] = [
+    "success_rate",
+    "pushes_to_recover",
+    "pre_change_median_displacement_error_mm",
+    "post_change_median_displacement_error_mm",
+    "post_change_first10_median_displacement_error_mm",
+    "pushes_learned",
+];
+
+/// One condition's run at one seed, as its one-seed document holds it.
+fn condition_json(run: &ConditionRun) -> Value {
     json!({
         "success_rate": run.success_rate(),
         "pushes_to_recover": run.pushes_to_recover(),
-        "pre_change_median_displacement_error_mm": num(run.pre_change_error_mm()),
-        "post_change_median_displacement_error_mm": num(run.post_change_error_mm(usize::MAX)),
-        "post_change_first10_median_displacement_error_mm": num(run.post_change_error_mm(10)),
+        "pre_change_median_displacement_error_mm": finite_or_null(run.pre_change_error_mm()),
+        "post_change_median_displacement_error_mm": finite_or_null(run.post_change_error_mm(usize::MAX)),
+        "post_change_first10_median_displacement_error_mm": finite_or_null(run.post_change_error_mm(10)),
         "pushes_learned": run.episodes.iter().map(|e| e.pushes_learned).sum::<u64>(),
         "episodes": run.episodes.iter().map(|e| json!({
             "after_change": e.after_change,
             "success": e.success,
             "pushes": e.pushes,
-            "median_displacement_error_mm": num(e.median_displacement_error_mm),
-            "median_rotation_error_deg": num(e.median_rotation_error_deg),
+            "median_displacement_error_mm": finite_or_null(e.median_displacement_error_mm),
+            "median_rotation_error_deg": finite_or_null(e.median_rotation_error_deg),
             "pushes_learned": e.pushes_learned,
         })).collect::<Vec<_>>(),
         "pushes": run.pushes.iter().map(|p| json!({
@@ -373,21 +429,297 @@ fn condition_json(run: &ConditionRun) -> serde_json::Value {
     })
 }
 
-/// `agp bench adapt`: both conditions side by side (two threads), the table, the JSON.
-pub fn run(args: &BenchAdaptArgs) -> Result<serde_json::Value> {
-    let wall = Instant::now();
-    let scenario = Scenario::resolve(&args.scenario)?;
-    let path = args
-        .ag
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("results/learn/{}.ag", scenario.name)));
-    let ag = AffordanceGradient::load_for(&path, &scenario.name).with_context(|| {
-        format!(
-            "cannot load the AG file {} (learn it first: agp bench learn --scenario {})",
+/// What every seed of one run shares, as the one-seed documents say it.
+struct RunInfo<'a> {
+    scenario: &'a Scenario,
+    change: WorldChange,
+    warmup: usize,
+    episodes: usize,
+    max_pushes: u32,
+    /// Whether each seed's AG was learned at that seed (no `--ag`).
+    ag_learned_at_seed: bool,
+}
+
+/// The document of one seed: both conditions' figures, episodes and pushes.
+fn one_seed_doc(
+    info: &RunInfo<'_>,
+    seed: u64,
+    ag_file: &Path,
+    runs: [&ConditionRun; 2],
+    wall_time_s: f64,
+) -> Value {
+    let object = &info.scenario.object;
+    let mut doc = Map::new();
+    doc.insert("benchmark".into(), json!("adapt"));
+    doc.insert("scenario".into(), json!(info.scenario.name));
+    doc.insert("seed".into(), json!(seed));
+    doc.insert("ag_file".into(), json!(ag_file.display().to_string()));
+    doc.insert("ag_learned_at_seed".into(), json!(info.ag_learned_at_seed));
+    doc.insert(
+        "before".into(),
+        json!({ "floor_friction": object.floor_friction, "mass_kg": object.mass }),
+    );
+    doc.insert(
+        "after".into(),
+        json!({
+            "floor_friction": info.change.floor_friction.unwrap_or(object.floor_friction),
+            "mass_kg": info.change.mass_kg.unwrap_or(object.mass),
+        }),
+    );
+    doc.insert("warmup_episodes".into(), json!(info.warmup));
+    doc.insert("episodes".into(), json!(info.episodes));
+    doc.insert("max_pushes".into(), json!(info.max_pushes));
+    doc.insert(
+        "recovery".into(),
+        json!({ "window_pushes": RECOVERY_WINDOW, "factor": RECOVERY_FACTOR }),
+    );
+    doc.insert(
+        "online_learning".into(),
+        json!({
+            "forgetting": OnlineLearningConfig::updating().forgetting,
+            "gain_step": OnlineLearningConfig::updating().gain_step,
+        }),
+    );
+    for ((name, _), run) in CONDITIONS.iter().zip(runs) {
+        doc.insert((*name).into(), condition_json(run));
+    }
+    doc.insert("wall_time_s".into(), json!(wall_time_s));
+    Value::Object(doc)
+}
+
+/// The fields of a one-seed document that are the same at every seed of one run.
+const RUN_FIELDS: [&str; 8] = [
+    "scenario",
+    "before",
+    "after",
+    "warmup_episodes",
+    "episodes",
+    "max_pushes",
+    "recovery",
+    "online_learning",
+];
+
+/// What must be alike in every seed of one adapt run: the run's fields, and the AG's
+/// source (learned at each seed, or the one file given).
+fn adapt_signature(doc: &Value) -> Value {
+    let mut sig: Map<String, Value> = RUN_FIELDS
+        .iter()
+        .map(|k| ((*k).to_owned(), doc[*k].clone()))
+        .collect();
+    let ag = if doc["ag_learned_at_seed"] == true {
+        json!("learned at each seed")
+    } else {
+        doc["ag_file"].clone()
+    };
+    sig.insert("ag".into(), ag);
+    Value::Object(sig)
+}
+
+/// The mean of the finite `values`; NaN when none is.
+fn mean_of(values: &[f64]) -> f64 {
+    Spread::of(values).map_or(f64::NAN, |s| s.mean)
+}
+
+/// One condition over the seeds: each figure's mean over the seeds (`pushes_to_recover`
+/// over the seeds that recovered, null when none did; the others listed in
+/// `not_recovered_seeds`), its `spread`, the figures per seed in `by_seed` (seed order,
+/// null where a seed has none), and every seed's episodes tagged with their seed.
+fn condition_over_seeds(parts: &SeedParts, name: &str) -> Value {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let own: Vec<u64> = parts.per_seed.iter().map(|(s, _, _)| *s).collect();
+    let mut out = Map::new();
+    let mut spread = Map::new();
+    let mut by_seed = Map::new();
+    by_seed.insert("seed".into(), json!(own));
+    for figure in FIGURES {
+        let values: Vec<f64> = docs.iter().map(|d| number_at(d, &[name, figure])).collect();
+        out.insert(figure.into(), finite_or_null(mean_of(&values)));
+        spread.insert(
+            figure.into(),
+            spread_at(docs.iter().copied(), &[name, figure]),
+        );
+        by_seed.insert(
+            figure.into(),
+            Value::Array(values.iter().map(|&v| finite_or_null(v)).collect()),
+        );
+    }
+    let never: Vec<u64> = parts
+        .per_seed
+        .iter()
+        .filter(|(_, _, d)| !number_at(d, &[name, "pushes_to_recover"]).is_finite())
+        .map(|(s, _, _)| *s)
+        .collect();
+    out.insert("recovered_seeds".into(), json!(own.len() - never.len()));
+    out.insert("not_recovered_seeds".into(), json!(never));
+    out.insert("spread".into(), Value::Object(spread));
+    out.insert("by_seed".into(), Value::Object(by_seed));
+    let episodes: Vec<Value> = parts
+        .per_seed
+        .iter()
+        .flat_map(|(seed, _, d)| {
+            d[name]["episodes"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+                .into_iter()
+                .map(move |mut e| {
+                    if let Some(m) = e.as_object_mut() {
+                        m.insert("seed".into(), json!(seed));
+                    }
+                    e
+                })
+        })
+        .collect();
+    out.insert("episodes".into(), Value::Array(episodes));
+    Value::Object(out)
+}
+
+/// The adapt document of `parts`: the run's fields, per condition each figure over the
+/// seeds ([`condition_over_seeds`]), `ag_file` (the one file every seed used, else null:
+/// each seed's is in its `per_seed` document), `seeds`, `per_seed` (and `shard`). Its
+/// `wall_time_s` is the longest seed's; the caller sets the run's own.
+fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
+    let docs: Vec<&Value> = parts.docs().collect();
+    let first = docs[0];
+    let mut doc = Map::new();
+    doc.insert("benchmark".into(), json!("adapt"));
+    doc.insert("seed".into(), first["seed"].clone());
+    for key in RUN_FIELDS {
+        doc.insert(key.into(), first[key].clone());
+    }
+    let ag_file = if docs.iter().all(|d| d["ag_file"] == first["ag_file"]) {
+        first["ag_file"].clone()
+    } else {
+        Value::Null
+    };
+    doc.insert("ag_file".into(), ag_file);
+    doc.insert(
+        "ag_learned_at_seed".into(),
+        first["ag_learned_at_seed"].clone(),
+    );
+    for (name, _) in CONDITIONS {
+        doc.insert(name.into(), condition_over_seeds(parts, name));
+    }
+    finish_seed_doc(doc, parts, shard)
+}
+
+/// The document of a run (or of its shard) over `all_seeds`, from the one-seed documents
+/// of the seeds it ran: what [`run`] writes.
+fn assemble_run(docs: &[Value], all_seeds: Vec<u64>, shard: Option<Shard>) -> Result<Value> {
+    let parts = gather(docs, "adapt", adapt_signature).map_err(anyhow::Error::new)?;
+    let parts = SeedParts {
+        seeds: all_seeds,
+        ..parts
+    };
+    Ok(assemble(&parts, shard))
+}
+
+/// Merges adapt documents of disjoint seed sets (one-seed documents, whole runs or a run's
+/// shards) into the document one run over all their seeds writes, but for `wall_time_s`:
+/// the longest part's. A part of another benchmark, of another run (scenario, change,
+/// episodes, AG source...) or a seed twice is refused naming the part.
+pub fn merge(parts: &[Value]) -> Result<Value> {
+    Ok(merge_parts(parts, "adapt", adapt_signature, assemble)?)
+}
+
+/// The human summary of an adapt document: per condition one line, each figure as one
+/// seed's value or `mean (min-max)` over the seeds; the seeds that never recovered named.
+pub fn print_adapt(doc: &Value) {
+    let docs: Vec<&Value> = doc["per_seed"]
+        .as_array()
+        .map(|a| a.iter().collect())
+        .unwrap_or_default();
+    let seeds: Vec<u64> = doc["seeds"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_u64).collect())
+        .unwrap_or_default();
+    let own: Vec<u64> = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
+    let many = own.len() > 1;
+    crate::say(format_args!(
+        "adapt `{}`: {} placements, then friction {} and mass {} kg, {} placements; {} {}{}; physics in-process",
+        doc["scenario"].as_str().unwrap_or("?"),
+        number_at(doc, &["warmup_episodes"]),
+        number_at(doc, &["after", "floor_friction"]),
+        number_at(doc, &["after", "mass_kg"]),
+        number_at(doc, &["episodes"]),
+        if many { "seeds" } else { "seed" },
+        seed_list(&own),
+        doc["shard"]
+            .as_str()
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
+            .unwrap_or_default(),
+    ));
+    if many {
+        crate::say(format_args!(
+            "each figure: mean (min-max) over the seeds; pushes to recover over the seeds that recovered"
+        ));
+    }
+    for (name, _) in CONDITIONS {
+        let shown = |key: &str, scale: f64, decimals: usize| {
+            let values: Vec<f64> = docs
+                .iter()
+                .map(|d| scale * number_at(d, &[name, key]))
+                .collect();
+            Spread::of(&values).map_or_else(|| "-".to_owned(), |s| s.show(decimals))
+        };
+        let never: Vec<u64> = docs
+            .iter()
+            .filter(|d| !number_at(d, &[name, "pushes_to_recover"]).is_finite())
+            .filter_map(|d| d["seed"].as_u64())
+            .collect();
+        let recover = match (never.is_empty(), never.len() == own.len()) {
+            (true, _) => shown("pushes_to_recover", 1.0, usize::from(many)),
+            (false, true) => "never".to_owned(),
+            (false, false) => format!(
+                "{} (never at {} {})",
+                shown("pushes_to_recover", 1.0, usize::from(many)),
+                if never.len() == 1 { "seed" } else { "seeds" },
+                seed_list(&never)
+            ),
+        };
+        crate::say(format_args!(
+            "{name:>9}: success {} %, displacement error {} mm before the change, {} mm after (first 10 pushes {} mm), pushes to recover {recover}, pushes learned {}",
+            shown("success_rate", 100.0, 0),
+            shown("pre_change_median_displacement_error_mm", 1.0, 1),
+            shown("post_change_median_displacement_error_mm", 1.0, 1),
+            shown("post_change_first10_median_displacement_error_mm", 1.0, 1),
+            shown("pushes_learned", 1.0, 0),
+        ));
+    }
+}
+
+/// The AG file of `seed`: `--ag`, or the learning benchmark's file of the object learned at
+/// that seed, `results/learn/seed-<S>/<object>.ag`, learned first (and said so) when missing.
+fn ag_file_of(args: &BenchAdaptArgs, scenario: &Scenario, seed: u64) -> Result<PathBuf> {
+    if let Some(path) = &args.ag {
+        return Ok(path.clone());
+    }
+    let dir = Path::new(bench_learn::DEFAULT_OUT).join(format!("seed-{seed}"));
+    let path = bench_learn::ag_path(&dir, scenario);
+    if !path.is_file() {
+        crate::say(format_args!(
+            "no affordance gradient of `{}` learned at seed {seed} at {}: learning it first (agp bench learn --scenario {} --seed {seed} --out {})",
+            scenario.name,
             path.display(),
-            scenario.name
-        )
-    })?;
+            args.scenario,
+            dir.display()
+        ));
+        bench_learn::learn(&BenchLearnArgs {
+            seeds: SeedArgs::one(seed),
+            ..BenchLearnArgs::for_scenarios(&[&args.scenario], dir.clone())
+        })
+        .with_context(|| format!("cannot learn `{}` at seed {seed}", scenario.name))?;
+    }
+    Ok(path)
+}
+
+/// `agp bench adapt`: at every seed of this run (its shard's share with `--shard`) both
+/// conditions, every (seed, condition) side by side on the cores; the one-seed documents
+/// assembled into the run's, the summary, the JSON.
+pub fn run(args: &BenchAdaptArgs) -> Result<Value> {
+    let wall = Instant::now();
+    let scenario = Scenario::resolve(&args.scenario)
+        .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
     let friction = match (args.friction, args.mass_kg) {
         (None, None) => Some(0.25),
         (f, _) => f,
@@ -404,82 +736,335 @@ pub fn run(args: &BenchAdaptArgs) -> Result<serde_json::Value> {
     if args.episodes == 0 {
         bail!("`--episodes` must be at least 1");
     }
+    if let Some(path) = args.ag.as_deref().filter(|p| !p.is_file()) {
+        bail!("--ag {}: no such file", path.display());
+    }
     let change = WorldChange {
         at_s: 0.0,
         floor_friction: friction,
         mass_kg: args.mass_kg,
     };
-    let setup = AdaptSetup {
-        scenario: &scenario,
-        ag: &ag,
-        change,
-        warmup: args.warmup,
-        episodes: args.episodes,
-        seed: args.seed,
-        max_pushes: args.max_pushes,
-    };
+    let all_seeds = args.seeds.all();
+    let seeds = args.seeds.mine();
     crate::say(format_args!(
-        "bench adapt: `{}` learned at floor friction {} and {} kg ({}); {} placements, then friction {} and mass {} kg, {} placements; frozen and updating",
+        "bench adapt: `{}` learned at floor friction {} and {} kg ({}); {} placements, then friction {} and mass {} kg, {} placements; frozen and updating; {} {}{}",
         scenario.name,
         scenario.object.floor_friction,
         scenario.object.mass,
-        path.display(),
+        args.ag.as_ref().map_or_else(
+            || format!(
+                "each seed's AG learned at that seed, {}/seed-<S>/",
+                bench_learn::DEFAULT_OUT
+            ),
+            |p| p.display().to_string()
+        ),
         args.warmup,
         friction.unwrap_or(scenario.object.floor_friction),
         args.mass_kg.unwrap_or(scenario.object.mass),
-        args.episodes
+        args.episodes,
+        if seeds.len() == 1 { "seed" } else { "seeds" },
+        seed_list(&seeds),
+        args.seeds
+            .shard
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
+            .unwrap_or_default()
     ));
-    let (frozen, updating) = std::thread::scope(|s| {
-        let frozen = s.spawn(|| run_condition(&setup, OnlineLearningConfig::default()));
-        let updating = run_condition(&setup, OnlineLearningConfig::updating());
-        (
-            frozen
-                .join()
-                .unwrap_or_else(|_| Err(anyhow::anyhow!("the frozen run panicked"))),
-            updating,
-        )
-    });
-    let (frozen, updating) = (frozen?, updating?);
-    for (name, r) in [("frozen", &frozen), ("updating", &updating)] {
-        crate::say(format_args!(
-            "{name:>9}: success {:.0} %, displacement error {:.1} mm before the change, {:.1} mm after (first 10 pushes {:.1} mm), pushes to recover {}, pushes learned {}",
-            100.0 * r.success_rate(),
-            r.pre_change_error_mm(),
-            r.post_change_error_mm(usize::MAX),
-            r.post_change_error_mm(10),
-            r.pushes_to_recover()
-                .map_or("never".to_owned(), |k| k.to_string()),
-            r.episodes.iter().map(|e| e.pushes_learned).sum::<u64>()
-        ));
-    }
-    let report = json!({
-        "benchmark": "adapt",
-        "scenario": scenario.name,
-        "seed": args.seed,
-        "ag_file": path.display().to_string(),
-        "before": { "floor_friction": scenario.object.floor_friction, "mass_kg": scenario.object.mass },
-        "after": {
-            "floor_friction": friction.unwrap_or(scenario.object.floor_friction),
-            "mass_kg": args.mass_kg.unwrap_or(scenario.object.mass),
-        },
-        "warmup_episodes": args.warmup,
-        "episodes": args.episodes,
-        "recovery": { "window_pushes": RECOVERY_WINDOW, "factor": RECOVERY_FACTOR },
-        "online_learning": {
-            "forgetting": OnlineLearningConfig::updating().forgetting,
-            "gain_step": OnlineLearningConfig::updating().gain_step,
-        },
-        "frozen": condition_json(&frozen),
-        "updating": condition_json(&updating),
-        "wall_time_s": wall.elapsed().as_secs_f64(),
-    });
+    let ag_files: Vec<PathBuf> = seeds
+        .iter()
+        .map(|&seed| ag_file_of(args, &scenario, seed))
+        .collect::<Result<_>>()?;
+    let ags: Vec<AffordanceGradient> = ag_files
+        .iter()
+        .map(|path| {
+            AffordanceGradient::load_for(path, &scenario.name).with_context(|| {
+                format!(
+                    "cannot load the AG file {} (learn it first: agp bench learn --scenario {})",
+                    path.display(),
+                    scenario.name
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
+    let setups: Vec<AdaptSetup<'_>> = seeds
+        .iter()
+        .zip(&ags)
+        .map(|(&seed, ag)| AdaptSetup {
+            scenario: &scenario,
+            ag,
+            change,
+            warmup: args.warmup,
+            episodes: args.episodes,
+            seed,
+            max_pushes: args.max_pushes,
+        })
+        .collect();
+    let work: Vec<(usize, usize)> = (0..setups.len())
+        .flat_map(|k| (0..CONDITIONS.len()).map(move |c| (k, c)))
+        .collect();
+    let runs = side_by_side(&work, |&(k, c)| {
+        let started = Instant::now();
+        let (name, online) = CONDITIONS[c];
+        let run = run_condition(&setups[k], online())
+            .with_context(|| format!("seed {}, {name}", setups[k].seed))?;
+        Ok((run, started.elapsed().as_secs_f64()))
+    })
+    .into_iter()
+    .collect::<Result<Vec<(ConditionRun, f64)>>>()?;
+    let info = RunInfo {
+        scenario: &scenario,
+        change,
+        warmup: args.warmup,
+        episodes: args.episodes,
+        max_pushes: args.max_pushes,
+        ag_learned_at_seed: args.ag.is_none(),
+    };
+    let docs: Vec<Value> = seeds
+        .iter()
+        .zip(&ag_files)
+        .zip(runs.chunks(CONDITIONS.len()))
+        .map(|((&seed, ag_file), pair)| {
+            let wall_s = pair.iter().map(|(_, w)| *w).fold(0.0, f64::max);
+            one_seed_doc(&info, seed, ag_file, [&pair[0].0, &pair[1].0], wall_s)
+        })
+        .collect();
+    let mut doc = assemble_run(&docs, all_seeds, args.seeds.shard)?;
+    let wall_time_s = wall.elapsed().as_secs_f64();
+    doc["wall_time_s"] = json!(wall_time_s);
+    print_adapt(&doc);
+    crate::say(format_args!("wall time {wall_time_s:.1} s"));
     if let Some(out) = &args.json {
-        let text = serde_json::to_string_pretty(&report)?;
         if out.as_os_str() == "-" {
+            let text = serde_json::to_string_pretty(&doc)?;
             crate::say(format_args!("{text}"));
         } else {
-            std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+            write_json(out, &doc)?;
+            crate::say(format_args!("JSON     {}", out.display()));
         }
     }
-    Ok(report)
+    Ok(doc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A condition of a hand-made one-seed document: `recover` None when it never
+    /// recovered.
+    fn condition(success: f64, recover: Option<usize>, after_mm: f64, learned: u64) -> Value {
+        json!({
+            "success_rate": success,
+            "pushes_to_recover": recover,
+            "pre_change_median_displacement_error_mm": 2.0,
+            "post_change_median_displacement_error_mm": after_mm,
+            "post_change_first10_median_displacement_error_mm": after_mm + 1.0,
+            "pushes_learned": learned,
+            "episodes": [
+                { "after_change": false, "success": true, "pushes": 4 },
+                { "after_change": true, "success": success > 0.5, "pushes": 9 },
+            ],
+            "pushes": [],
+        })
+    }
+
+    /// A one-seed document as a run writes it, with made-up figures.
+    fn seed_doc(seed: u64, frozen: Value, updating: Value) -> Value {
+        json!({
+            "benchmark": "adapt",
+            "scenario": "triangle",
+            "seed": seed,
+            "ag_file": format!("results/learn/seed-{seed}/triangle.ag"),
+            "ag_learned_at_seed": true,
+            "before": { "floor_friction": 0.4, "mass_kg": 0.1 },
+            "after": { "floor_friction": 0.4, "mass_kg": 0.3 },
+            "warmup_episodes": 1,
+            "episodes": 1,
+            "max_pushes": 60,
+            "recovery": { "window_pushes": RECOVERY_WINDOW, "factor": RECOVERY_FACTOR },
+            "online_learning": { "forgetting": 0.9, "gain_step": 0.1 },
+            "frozen": frozen,
+            "updating": updating,
+            "wall_time_s": seed as f64 - 99.0,
+        })
+    }
+
+    /// Seeds 100-102: the frozen gradient recovers at 100 only, the updating one at all.
+    fn three_seeds() -> Vec<Value> {
+        vec![
+            seed_doc(
+                100,
+                condition(0.0, Some(12), 9.0, 0),
+                condition(1.0, Some(4), 3.0, 10),
+            ),
+            seed_doc(
+                101,
+                condition(0.0, None, 11.0, 0),
+                condition(1.0, Some(6), 4.0, 12),
+            ),
+            seed_doc(
+                102,
+                condition(1.0, None, 10.0, 0),
+                condition(0.0, Some(8), 5.0, 14),
+            ),
+        ]
+    }
+
+    /// A part as `agp bench adapt --seeds 3 --shard I/2` writes it.
+    fn shard_part(docs: &[Value], all: &[u64], index: u64) -> Value {
+        let shard = Shard { index, count: 2 };
+        let mine = shard.pick(all);
+        let own: Vec<Value> = docs
+            .iter()
+            .filter(|d| d["seed"].as_u64().is_some_and(|s| mine.contains(&s)))
+            .cloned()
+            .collect();
+        assemble_run(&own, all.to_vec(), Some(shard)).expect("a shard's part")
+    }
+
+    #[test]
+    fn two_shard_partials_merged_equal_the_run_over_every_seed() {
+        let docs = three_seeds();
+        let all = [100, 101, 102];
+        let whole = assemble_run(&docs, all.to_vec(), None).expect("the run");
+        let first = shard_part(&docs, &all, 1);
+        let second = shard_part(&docs, &all, 2);
+        assert_eq!(first["per_seed"].as_array().map(Vec::len), Some(2));
+        assert_eq!(first["shard"], json!("1/2"));
+        // In either order, the merge is the one-run document (wall time: the longest
+        // seed's, 3 s, in both).
+        assert_eq!(
+            merge(&[second.clone(), first.clone()]).expect("merge"),
+            whole
+        );
+        assert_eq!(merge(&[first, second]).expect("merge"), whole);
+        // The one-seed documents merged directly give it too.
+        assert_eq!(merge(&docs).expect("merge"), whole);
+        assert_eq!(whole["seeds"], json!(all));
+        assert_eq!(whole["per_seed"], json!(docs));
+    }
+
+    #[test]
+    fn each_figure_is_the_mean_over_the_seeds_and_a_seed_that_never_recovered_stays_visible() {
+        let whole = assemble_run(&three_seeds(), vec![100, 101, 102], None).expect("the run");
+        let frozen = &whole["frozen"];
+        let updating = &whole["updating"];
+        let close = |v: &Value, want: f64| (v.as_f64().unwrap_or(f64::NAN) - want).abs() < 1e-12;
+        assert!(close(&frozen["success_rate"], 1.0 / 3.0), "{frozen}");
+        assert!(close(&updating["success_rate"], 2.0 / 3.0), "{updating}");
+        assert!(close(&updating["pushes_to_recover"], 6.0), "{updating}");
+        assert!(close(&updating["pushes_learned"], 12.0), "{updating}");
+        assert!(close(
+            &frozen["post_change_median_displacement_error_mm"],
+            10.0
+        ));
+        // The frozen gradient recovered at seed 100 only: its mean is over that seed, the
+        // two others are named, null per seed and counted missing in the spread.
+        assert!(close(&frozen["pushes_to_recover"], 12.0), "{frozen}");
+        assert_eq!(frozen["recovered_seeds"], json!(1));
+        assert_eq!(frozen["not_recovered_seeds"], json!([101, 102]));
+        assert_eq!(
+            frozen["by_seed"]["pushes_to_recover"],
+            json!([12.0, null, null])
+        );
+        assert_eq!(frozen["spread"]["pushes_to_recover"]["n"], json!(1));
+        assert_eq!(frozen["spread"]["pushes_to_recover"]["missing"], json!(2));
+        assert_eq!(updating["not_recovered_seeds"], json!([]));
+        let spread: Spread =
+            serde_json::from_value(updating["spread"]["success_rate"].clone()).expect("a spread");
+        assert_eq!((spread.min, spread.max, spread.n), (0.0, 1.0, 3));
+        // Every seed's episodes, tagged with their seed; every seed's AG file in its own
+        // document, none shared.
+        assert_eq!(frozen["episodes"].as_array().map(Vec::len), Some(6));
+        assert_eq!(frozen["episodes"][5]["seed"], json!(102));
+        assert_eq!(whole["ag_file"], Value::Null);
+        assert_eq!(whole["seed"], json!(100));
+        assert_eq!(whole["wall_time_s"], json!(3.0));
+    }
+
+    /// `agp bench merge` on `parts` written to files named `names`: its error.
+    fn merge_files(parts: &[Value], names: &[&str]) -> String {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let files: Vec<PathBuf> = parts
+            .iter()
+            .zip(names)
+            .map(|(part, name)| {
+                let file = dir.path().join(name);
+                write_json(&file, part).expect("written");
+                file
+            })
+            .collect();
+        let args = crate::bench_merge::BenchMergeArgs {
+            parts: files,
+            json: dir.path().join("merged.json"),
+            plot: None,
+        };
+        let err = crate::bench_merge::run(&args).expect_err("refused");
+        assert!(!dir.path().join("merged.json").exists());
+        format!("{err:#}")
+    }
+
+    #[test]
+    fn a_merge_refuses_a_part_of_another_benchmark_naming_its_file() {
+        let docs = three_seeds();
+        let place = json!({"benchmark": "place", "seed": 103, "scenario": "triangle"});
+        let err = merge_files(&[docs[0].clone(), place], &["adapt-100.json", "place.json"]);
+        assert!(
+            err.contains("place.json`: a `place` result, not `adapt`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_merge_refuses_a_seed_given_twice_naming_both_files() {
+        let docs = three_seeds();
+        let all = [100, 101, 102];
+        let first = shard_part(&docs, &all, 1);
+        let again = shard_part(&docs, &all, 1);
+        let mut relabelled = again.clone();
+        relabelled["shard"] = json!("2/2");
+        let err = merge_files(&[first, relabelled], &["part-1.json", "part-2.json"]);
+        assert!(
+            err.contains("part-2.json`: seed 100 is also in `") && err.contains("part-1.json`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_merge_refuses_a_seed_of_another_change_or_ag_source() {
+        let docs = three_seeds();
+        let mut heavier = docs[1].clone();
+        heavier["after"]["mass_kg"] = json!(0.5);
+        let err = merge(&[docs[0].clone(), heavier]).expect_err("refused");
+        assert!(err.to_string().contains("`after`"), "{err}");
+        let mut given = docs[1].clone();
+        given["ag_learned_at_seed"] = json!(false);
+        let err = merge(&[docs[0].clone(), given]).expect_err("refused");
+        assert!(err.to_string().contains("`ag`"), "{err}");
+    }
+
+    #[test]
+    fn the_command_line_takes_the_seed_options_of_every_benchmark() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cli {
+            #[command(flatten)]
+            adapt: BenchAdaptArgs,
+        }
+        let cli = Cli::try_parse_from(["adapt"]).expect("defaults");
+        assert_eq!(cli.adapt.seeds.all(), vec![100, 101, 102, 103, 104]);
+        let cli = Cli::try_parse_from([
+            "adapt",
+            "--seeds",
+            "3",
+            "--first-seed",
+            "7",
+            "--shard",
+            "2/2",
+        ])
+        .expect("parses");
+        assert_eq!(cli.adapt.seeds.all(), vec![7, 8, 9]);
+        assert_eq!(cli.adapt.seeds.mine(), vec![9]);
+        let cli = Cli::try_parse_from(["adapt", "--seed", "7"]).expect("parses");
+        assert_eq!(cli.adapt.seeds.mine(), vec![7]);
+        assert!(Cli::try_parse_from(["adapt", "--seed", "7", "--seeds", "2"]).is_err());
+    }
 }

@@ -1,7 +1,8 @@
 //! `agp bench merge`: the partial JSONs of a run split with `--shard I/N` (or any documents
 //! of one benchmark over disjoint seeds) merged into the JSON one run over all their seeds
 //! writes. Each benchmark merges its own documents (`bench_learn::merge`,
-//! `bench_tasks::merge`, `bench_trajectory::merge`, `bench_paper::merge`); this module reads
+//! `bench_tasks::merge`, `bench_trajectory::merge`, `bench_paper::merge`,
+//! `bench_adapt::merge`); this module reads
 //! the files, checks that they are parts of one run, and names the file at fault.
 
 use std::path::{Path, PathBuf};
@@ -11,7 +12,7 @@ use serde_json::Value;
 
 use crate::bench_tasks::{physics_note, print_place, write_json};
 use crate::seeds::{MergePartError, number_at, seed_list};
-use crate::{bench_learn, bench_paper, bench_tasks, bench_trajectory};
+use crate::{bench_adapt, bench_learn, bench_paper, bench_tasks, bench_trajectory};
 
 /// The options of `agp bench merge`.
 #[derive(Debug, Clone, clap::Args)]
@@ -50,7 +51,10 @@ pub fn merge_docs(benchmark: &str, parts: &[Value]) -> Result<Value> {
         "learn" => bench_learn::merge(parts),
         "trajectory" => bench_trajectory::merge(parts),
         "paper" => bench_paper::merge(parts),
-        other => bail!("`{other}` results cannot be merged (place, learn, trajectory, paper)"),
+        "adapt" => bench_adapt::merge(parts),
+        other => {
+            bail!("`{other}` results cannot be merged (place, learn, trajectory, paper, adapt)")
+        }
     }
 }
 
@@ -85,6 +89,9 @@ pub fn run(args: &BenchMergeArgs) -> Result<Value> {
         .unwrap_or_default();
     if benchmark == "place" {
         print_place(&doc, physics_note(doc["physics"] == "in-process"));
+    }
+    if benchmark == "adapt" {
+        bench_adapt::print_adapt(&doc);
     }
     println!(
         "merged {} parts of `{benchmark}`: seeds {}; wall time of the longest part {:.1} s",

@@ -171,6 +171,7 @@ fn trajectory_signature(doc: &Value) -> Value {
     json!({
         "scenario": doc["scenario"],
         "physics": doc["physics"],
+        "keep_heading_deg": doc["keep_heading_deg"],
         "paths": paths,
     })
 }
@@ -265,6 +266,7 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
     doc.insert("scenario".into(), first["scenario"].clone());
     doc.insert("seed".into(), first["seed"].clone());
     doc.insert("physics".into(), first["physics"].clone());
+    doc.insert("keep_heading_deg".into(), first["keep_heading_deg"].clone());
     doc.insert("planners".into(), overall_value);
     doc.insert("ratio".into(), finite_or_null(ratio));
     doc.insert("paths".into(), Value::Object(paths));
@@ -460,6 +462,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
             &scenario.name,
             seed,
             args.in_process,
+            keep_heading_rad,
             &paths,
             per_path,
             wall_s,
@@ -493,6 +496,7 @@ fn one_seed_doc(
     scenario: &str,
     seed: u64,
     in_process: bool,
+    keep_heading_rad: Option<f64>,
     paths: &[(NamedPath, Vec<DVec2>)],
     per_path: Vec<Map<String, Value>>,
     wall_s: f64,
@@ -537,6 +541,7 @@ fn one_seed_doc(
         "scenario": scenario,
         "seed": seed,
         "physics": physics_label(in_process),
+        "keep_heading_deg": keep_heading_rad.map(f64::to_degrees),
         "planners": planners,
         "ratio": finite_or_null(ratio),
         "paths": paths_value,
@@ -645,7 +650,7 @@ mod tests {
                 m
             })
             .collect();
-        one_seed_doc("lshape", seed, false, &paths, per_path, 1.0)
+        one_seed_doc("lshape", seed, false, None, &paths, per_path, 1.0)
     }
 
     #[test]

@@ -160,11 +160,12 @@ impl PipelineBench {
                 path,
                 keep_heading_rad,
             } => {
-                cmd.args(["--mode", "trajectory", "--path"])
-                    .args(path.iter().map(|p| format!("{},{}", p.x * 1e3, p.y * 1e3)));
+                // Before `--path`, which takes every word after it.
                 if let Some(h) = keep_heading_rad {
                     cmd.arg("--keep-heading").arg(format!("{}", h.to_degrees()));
                 }
+                cmd.args(["--mode", "trajectory", "--path"])
+                    .args(path.iter().map(|p| format!("{},{}", p.x * 1e3, p.y * 1e3)));
             }
         }
         let wall = Instant::now();
