@@ -541,7 +541,8 @@ fn one_seed_doc(
         "scenario": scenario,
         "seed": seed,
         "physics": physics_label(in_process),
-        "keep_heading_deg": keep_heading_rad.map(f64::to_degrees),
+        // To the micro-degree: what was asked, not its round trip through radians.
+        "keep_heading_deg": keep_heading_rad.map(|h| (h.to_degrees() * 1e6).round() / 1e6),
         "planners": planners,
         "ratio": finite_or_null(ratio),
         "paths": paths_value,
