@@ -92,31 +92,31 @@ fn bench_place_writes_every_planners_figures_over_the_pipeline_and_leaves_no_fil
     assert_eq!(bench_files_left(run.pid), 0);
 }
 
+/// `agp bench trajectory` of the L at seed 7 with the test AG, JSON to `t.json`, and `more`.
+fn bench_trajectory_of_seed_7(dir: &std::path::Path, more: &[&str]) -> agp_tests::Finished {
+    let ag = learned_ag("lshape");
+    let ag = ag.to_str().expect("a UTF-8 path");
+    let mut args = vec![
+        "bench",
+        "trajectory",
+        "--scenario",
+        "lshape",
+        "--ag",
+        ag,
+        "--seed",
+        "7",
+        "--json",
+        "t.json",
+    ];
+    args.extend_from_slice(more);
+    run_agp(dir, &args, TIMEOUT)
+}
+
 #[test]
 fn a_trajectory_that_asks_to_keep_the_heading_hands_it_to_the_planner_process() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let ag = learned_ag("lshape");
-    let ag = ag.to_str().expect("a UTF-8 path");
-    let run = run_agp(
-        dir.path(),
-        &[
-            "bench",
-            "trajectory",
-            "--scenario",
-            "lshape",
-            "--ag",
-            ag,
-            "--seed",
-            "7",
-            "--paths",
-            "straight",
-            "--keep-heading",
-            "15",
-            "--json",
-            "t.json",
-        ],
-        TIMEOUT,
-    );
+    let run =
+        bench_trajectory_of_seed_7(dir.path(), &["--paths", "straight", "--keep-heading", "15"]);
     // Each episode's planner process takes the heading with its path (it refuses an
     // argument it does not know, and the run would fail).
     assert!(run.status.success(), "{}\n{}", run.stdout, run.stderr);
@@ -131,27 +131,9 @@ fn a_trajectory_that_asks_to_keep_the_heading_hands_it_to_the_planner_process() 
 #[test]
 fn bench_trajectory_compares_both_planners_on_each_path_of_one_seed() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let ag = learned_ag("lshape");
-    let ag = ag.to_str().expect("a UTF-8 path");
-    let run = run_agp(
+    let run = bench_trajectory_of_seed_7(
         dir.path(),
-        &[
-            "bench",
-            "trajectory",
-            "--scenario",
-            "lshape",
-            "--ag",
-            ag,
-            "--seed",
-            "7",
-            "--paths",
-            "straight,bend90",
-            "--json",
-            "t.json",
-            "--plot",
-            "t.svg",
-        ],
-        TIMEOUT,
+        &["--paths", "straight,bend90", "--plot", "t.svg"],
     );
     assert!(run.status.success(), "{}\n{}", run.stdout, run.stderr);
     let v = json(&dir.path().join("t.json"));

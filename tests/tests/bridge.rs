@@ -127,6 +127,26 @@ fn a_planner_in_another_instance_joined_only_by_the_bridge_places_the_object() {
     );
 }
 
+/// Swaps the planner of instance `name` (in `dir`): the new one, epoch 1, drives.
+fn swap_the_planner(dir: &Path, name: &str) {
+    let swap = run_agp(
+        dir,
+        &[
+            "swap",
+            "planner",
+            "--instance",
+            name,
+            "--json",
+            "--timeout-s",
+            "60",
+        ],
+        TIMEOUT,
+    );
+    swap.assert_success("the swap of the remote planner");
+    let v: Value = serde_json::from_str(&swap.stdout).expect("JSON");
+    assert_eq!(v["epoch"], 1, "{v}");
+}
+
 /// Physics steps the first planner drives before the swap is asked for: it has turned to
 /// the object and is circling it (about 7,000 steps), far from placing it (9 pushes).
 const STEPS_BEFORE_SWAP: usize = 8_000;
@@ -145,22 +165,7 @@ fn a_swap_of_the_remote_planner_during_a_placement_across_the_bridge_still_reach
     up_b.until("the steps before the swap", PLACE_TIMEOUT, || {
         log.len() >= STEPS_BEFORE_SWAP
     });
-    let swap = run_agp(
-        planner.path(),
-        &[
-            "swap",
-            "planner",
-            "--instance",
-            b,
-            "--json",
-            "--timeout-s",
-            "60",
-        ],
-        TIMEOUT,
-    );
-    swap.assert_success("the swap of the remote planner");
-    let v: Value = serde_json::from_str(&swap.stdout).expect("JSON");
-    assert_eq!(v["epoch"], 1, "{v}");
+    swap_the_planner(planner.path(), b);
     let end_b = up_b.wait(PLACE_TIMEOUT);
     let end_a = up_a.wait(TIMEOUT);
     println!(
@@ -248,22 +253,7 @@ fn a_swap_of_the_remote_planner_during_a_live_session_across_the_bridge_still_re
     });
     let pursued = status_json(robot.path(), a, TIMEOUT);
     assert_eq!(pursued["goals"][0]["state"], "pursued", "{pursued}");
-    let swap = run_agp(
-        planner.path(),
-        &[
-            "swap",
-            "planner",
-            "--instance",
-            b,
-            "--json",
-            "--timeout-s",
-            "60",
-        ],
-        TIMEOUT,
-    );
-    swap.assert_success("the swap of the remote planner");
-    let v: Value = serde_json::from_str(&swap.stdout).expect("JSON");
-    assert_eq!(v["epoch"], 1, "{v}");
+    swap_the_planner(planner.path(), b);
 
     // The swapped-in planner takes the goal on from B's goal topic, which the bridge keeps,
     // and its end crosses back to A's supervisor, which judges it.

@@ -2,52 +2,17 @@
 //! each end in a thread of this test: what one side publishes the other gets, in order,
 //! restamped for its own supervisor, the latched state included for an end that joins late.
 
-use std::sync::mpsc;
-use std::thread::JoinHandle;
+mod common;
+
+use common::{TIMEOUT, config, instance, start};
+
 use std::time::{Duration, Instant};
 
-use agp_bridge::{
-    BridgeConfig, BridgeEnd, BridgeError, BridgeReport, Endpoint, Side, all_topics, run_bridge,
-};
-use agp_runtime::{AgpIpc, Instance, WaitStrategy};
+use agp_bridge::{BridgeEnd, BridgeReport, Endpoint, Side};
 use agp_shared_types::{
     ActiveEpoch, GRIDS_PER_ALPHA, GradientGrid, IrFrame, MotorCommand, ServiceNames,
 };
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::Node;
-
-/// Safety net of every wait; the checks never depend on it.
-const TIMEOUT: Duration = Duration::from_secs(30);
-
-fn config(side: Side, endpoint: Endpoint, epoch: u64, token: u64) -> BridgeConfig {
-    BridgeConfig {
-        side,
-        endpoint,
-        topics: all_topics(),
-        link: "t-forwarding".to_owned(),
-        epoch,
-        token,
-        key: None,
-        node_name: format!("bridge-{}", side.name()),
-        wait: WaitStrategy::Block,
-    }
-}
-
-/// Runs one end in a thread; returns once its ports are open.
-fn start(
-    instance: &Instance,
-    config: BridgeConfig,
-) -> JoinHandle<Result<BridgeReport, BridgeError>> {
-    let instance = instance.clone();
-    let (tx, rx) = mpsc::channel();
-    let handle = std::thread::spawn(move || {
-        run_bridge(&instance, &config, || {
-            let _ = tx.send(());
-        })
-    });
-    let _ = rx.recv_timeout(TIMEOUT);
-    handle
-}
 
 /// Polls `f` until it gives something.
 #[track_caller]
@@ -60,16 +25,6 @@ fn until<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
         assert!(Instant::now() < deadline, "{what} never came");
         std::thread::sleep(Duration::from_millis(1));
     }
-}
-
-/// An instance with the control service a supervisor would hold (the bridge stops when it
-/// is gone).
-fn instance(name: &str) -> (Instance, Node<AgpIpc>, agp_runtime::ControlService) {
-    let instance = Instance::new(name).expect("a valid name");
-    let _ = instance.remove_files();
-    let node = instance.node("test", false).expect("node");
-    let control = instance.create_control(&node).expect("control service");
-    (instance, node, control)
 }
 
 #[test]
@@ -157,6 +112,7 @@ fn frames_grids_and_commands_cross_in_order_restamped_and_a_late_end_gets_the_la
         config(
             Side::Robot,
             Endpoint::listen(&format!("tcp/127.0.0.1:{port}")).expect("endpoint"),
+            "t-forwarding",
             5,
             77,
         ),
@@ -166,6 +122,7 @@ fn frames_grids_and_commands_cross_in_order_restamped_and_a_late_end_gets_the_la
         config(
             Side::Planner,
             Endpoint::connect(&format!("tcp/127.0.0.1:{port}")).expect("endpoint"),
+            "t-forwarding",
             0,
             0,
         ),

@@ -3,56 +3,14 @@
 //! far end joined and hands it over, in order, once it has. (Its own test binary: stopping
 //! a bridge is process-wide.)
 
-use std::sync::mpsc;
-use std::thread::JoinHandle;
+mod common;
+
+use common::{TIMEOUT, config, instance, start};
+
 use std::time::{Duration, Instant};
 
-use agp_bridge::{BridgeConfig, BridgeError, BridgeReport, Endpoint, Side, all_topics, run_bridge};
-use agp_runtime::{AgpIpc, Instance, WaitStrategy};
+use agp_bridge::{BridgeReport, Endpoint, Side};
 use agp_shared_types::{ActiveEpoch, GoalEnd, MotorCommand, write_str};
-use iceoryx2::prelude::Node;
-
-/// Safety net of every wait; the checks never depend on it.
-const TIMEOUT: Duration = Duration::from_secs(30);
-
-fn config(side: Side, endpoint: Endpoint, epoch: u64, token: u64) -> BridgeConfig {
-    BridgeConfig {
-        side,
-        endpoint,
-        topics: all_topics(),
-        link: "t-late".to_owned(),
-        epoch,
-        token,
-        key: None,
-        node_name: format!("bridge-{}", side.name()),
-        wait: WaitStrategy::Block,
-    }
-}
-
-/// Runs one end in a thread; returns once its ports are open.
-fn start(
-    instance: &Instance,
-    config: BridgeConfig,
-) -> JoinHandle<Result<BridgeReport, BridgeError>> {
-    let instance = instance.clone();
-    let (tx, rx) = mpsc::channel();
-    let handle = std::thread::spawn(move || {
-        run_bridge(&instance, &config, || {
-            let _ = tx.send(());
-        })
-    });
-    rx.recv_timeout(TIMEOUT).expect("the bridge's ports open");
-    handle
-}
-
-/// An instance with the control service a supervisor would hold.
-fn instance(name: &str) -> (Instance, Node<AgpIpc>, agp_runtime::ControlService) {
-    let instance = Instance::new(name).expect("a valid name");
-    let _ = instance.remove_files();
-    let node = instance.node("test", false).expect("node");
-    let control = instance.create_control(&node).expect("control service");
-    (instance, node, control)
-}
 
 #[test]
 fn commands_and_goal_ends_sent_before_the_far_end_joined_reach_it_in_order() {
@@ -85,6 +43,7 @@ fn commands_and_goal_ends_sent_before_the_far_end_joined_reach_it_in_order() {
         config(
             Side::Planner,
             Endpoint::connect(&format!("tcp/127.0.0.1:{port}")).expect("endpoint"),
+            "t-late",
             0,
             0,
         ),
@@ -129,6 +88,7 @@ fn commands_and_goal_ends_sent_before_the_far_end_joined_reach_it_in_order() {
         config(
             Side::Robot,
             Endpoint::listen(&format!("tcp/127.0.0.1:{port}")).expect("endpoint"),
+            "t-late",
             5,
             77,
         ),

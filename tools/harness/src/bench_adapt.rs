@@ -625,15 +625,11 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human summary of an adapt document: per condition one line, each figure as one
 /// seed's value or `mean (min-max)` over the seeds; the seeds that never recovered named.
 pub fn print_adapt(doc: &Value) {
-    let docs: Vec<&Value> = doc["per_seed"]
-        .as_array()
-        .map(|a| a.iter().collect())
-        .unwrap_or_default();
-    let seeds: Vec<u64> = doc["seeds"]
-        .as_array()
-        .map(|a| a.iter().filter_map(Value::as_u64).collect())
-        .unwrap_or_default();
-    let own: Vec<u64> = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
+    let crate::seeds::SeedLists {
+        docs,
+        all: seeds,
+        own,
+    } = crate::seeds::SeedLists::of(doc);
     let many = own.len() > 1;
     crate::say(format_args!(
         "adapt `{}`: {} placements, then friction {} and mass {} kg, {} placements; {} {}{}; physics in-process",

@@ -565,15 +565,11 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human table of a place document: one row per planner, each figure as one seed's
 /// value or `mean (min-max)` over the seeds.
 pub fn print_place(doc: &Value, note: &str) {
-    let docs: Vec<&Value> = doc["per_seed"]
-        .as_array()
-        .map(|a| a.iter().collect())
-        .unwrap_or_default();
-    let seeds: Vec<u64> = doc["seeds"]
-        .as_array()
-        .map(|a| a.iter().filter_map(Value::as_u64).collect())
-        .unwrap_or_default();
-    let own: Vec<u64> = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
+    let crate::seeds::SeedLists {
+        docs,
+        all: seeds,
+        own,
+    } = crate::seeds::SeedLists::of(doc);
     let many = own.len() > 1;
     let first = docs.first().copied().unwrap_or(doc);
     let episodes = first["planners"]

@@ -288,14 +288,9 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human table of a trajectory document: per path each planner's mean error, mean
 /// (min-max) over the seeds, and the ratio; then the overall figures.
 pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
-    let own: Vec<u64> = doc["per_seed"]
-        .as_array()
-        .map(|a| a.iter().filter_map(|d| d["seed"].as_u64()).collect())
-        .unwrap_or_default();
-    let seeds: Vec<u64> = doc["seeds"]
-        .as_array()
-        .map(|a| a.iter().filter_map(Value::as_u64).collect())
-        .unwrap_or_default();
+    let crate::seeds::SeedLists {
+        all: seeds, own, ..
+    } = crate::seeds::SeedLists::of(doc);
     println!(
         "trajectory `{}`: {} {}{}; {note}",
         doc["scenario"].as_str().unwrap_or("?"),

@@ -397,6 +397,30 @@ fn differences(sig: &Value, first: &Value) -> String {
     }
 }
 
+/// What a benchmark document says of its seeds: its one-seed documents (`per_seed`), every
+/// seed of the run (`seeds`, a shard's whole run included) and the seeds this document
+/// holds itself (each `per_seed` entry's `seed`).
+pub struct SeedLists<'a> {
+    pub docs: Vec<&'a Value>,
+    pub all: Vec<u64>,
+    pub own: Vec<u64>,
+}
+
+impl<'a> SeedLists<'a> {
+    pub fn of(doc: &'a Value) -> Self {
+        let docs: Vec<&Value> = doc["per_seed"]
+            .as_array()
+            .map(|a| a.iter().collect())
+            .unwrap_or_default();
+        let all = doc["seeds"]
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_u64).collect())
+            .unwrap_or_default();
+        let own = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
+        Self { docs, all, own }
+    }
+}
+
 /// `100-104`, or `100, 102` when not a run of consecutive seeds.
 pub fn seed_list(seeds: &[u64]) -> String {
     let consecutive = seeds.windows(2).all(|w| w[1] == w[0].wrapping_add(1));
