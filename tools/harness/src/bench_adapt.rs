@@ -48,8 +48,8 @@ use crate::bench_learn::{self, BenchLearnArgs};
 use crate::bench_tasks::write_json;
 use crate::in_process::InProcessWorld;
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
-    number_at, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, merge_parts, number_at,
+    run_parts, seed_list, spread_at,
 };
 use crate::side_by_side::side_by_side;
 use crate::task_goals::{median, place_goals};
@@ -606,12 +606,10 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
 /// The document of a run (or of its shard) over `all_seeds`, from the one-seed documents
 /// of the seeds it ran: what [`run`] writes.
 fn assemble_run(docs: &[Value], all_seeds: Vec<u64>, shard: Option<Shard>) -> Result<Value> {
-    let parts = gather(docs, "adapt", adapt_signature).map_err(anyhow::Error::new)?;
-    let parts = SeedParts {
-        seeds: all_seeds,
-        ..parts
-    };
-    Ok(assemble(&parts, shard))
+    Ok(assemble(
+        &run_parts(docs, "adapt", adapt_signature, all_seeds)?,
+        shard,
+    ))
 }
 
 /// Merges adapt documents of disjoint seed sets (one-seed documents, whole runs or a run's
@@ -625,25 +623,17 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human summary of an adapt document: per condition one line, each figure as one
 /// seed's value or `mean (min-max)` over the seeds; the seeds that never recovered named.
 pub fn print_adapt(doc: &Value) {
-    let crate::seeds::SeedLists {
-        docs,
-        all: seeds,
-        own,
-    } = crate::seeds::SeedLists::of(doc);
-    let many = own.len() > 1;
+    let lists = crate::seeds::SeedLists::of(doc);
+    let docs = &lists.docs;
+    let many = lists.own.len() > 1;
     crate::say(format_args!(
-        "adapt `{}`: {} placements, then friction {} and mass {} kg, {} placements; {} {}{}; physics in-process",
+        "adapt `{}`: {} placements, then friction {} and mass {} kg, {} placements; {}; physics in-process",
         doc["scenario"].as_str().unwrap_or("?"),
         number_at(doc, &["warmup_episodes"]),
         number_at(doc, &["after", "floor_friction"]),
         number_at(doc, &["after", "mass_kg"]),
         number_at(doc, &["episodes"]),
-        if many { "seeds" } else { "seed" },
-        seed_list(&own),
-        doc["shard"]
-            .as_str()
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
-            .unwrap_or_default(),
+        lists.describe(),
     ));
     if many {
         crate::say(format_args!(
@@ -663,7 +653,7 @@ pub fn print_adapt(doc: &Value) {
             .filter(|d| !number_at(d, &[name, "pushes_to_recover"]).is_finite())
             .filter_map(|d| d["seed"].as_u64())
             .collect();
-        let recover = match (never.is_empty(), never.len() == own.len()) {
+        let recover = match (never.is_empty(), never.len() == lists.own.len()) {
             (true, _) => shown("pushes_to_recover", 1.0, usize::from(many)),
             (false, true) => "never".to_owned(),
             (false, false) => format!(
@@ -760,10 +750,7 @@ pub fn run(args: &BenchAdaptArgs) -> Result<Value> {
         args.episodes,
         if seeds.len() == 1 { "seed" } else { "seeds" },
         seed_list(&seeds),
-        args.seeds
-            .shard
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
-            .unwrap_or_default()
+        args.seeds.shard_note()
     ));
     let ag_files: Vec<PathBuf> = seeds
         .iter()

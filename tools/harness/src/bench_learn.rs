@@ -22,8 +22,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{Map, Value, json};
 
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
-    number_at, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, merge_parts, number_at,
+    run_parts, seed_list, spread_at,
 };
 
 /// Alphas of the paper's protocol, degrees.
@@ -178,10 +178,7 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         "{} {}{}, alphas {} deg, {} trials per alpha, {} unseen pushes, push {} s at {:.0} mm/s",
         if seeds.len() == 1 { "seed" } else { "seeds" },
         seed_list(&seeds),
-        args.seeds
-            .shard
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
-            .unwrap_or_default(),
+        args.seeds.shard_note(),
         alphas_text(&cfg.alphas_deg),
         cfg.trials_per_alpha,
         cfg.eval_pushes,
@@ -272,11 +269,7 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     }
     bar.finish_and_clear();
 
-    let parts = gather(&docs, "learn", learn_signature).map_err(anyhow::Error::new)?;
-    let parts = SeedParts {
-        seeds: all_seeds,
-        ..parts
-    };
+    let parts = run_parts(&docs, "learn", learn_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);

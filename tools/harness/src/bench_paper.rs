@@ -12,7 +12,7 @@ use serde_json::{Map, Value, json};
 
 use crate::seeds::{
     SeedArgs, SeedParts, Shard, Spread, add_seed_fields, gather, longest_wall_time, number_at,
-    seed_list,
+    run_parts, seed_list,
 };
 
 use crate::bench_learn::{self, BenchLearnArgs};
@@ -139,11 +139,7 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
         };
         docs.push(run_seed(args, seed, &dir)?);
     }
-    let parts = gather(&docs, "paper", paper_signature).map_err(anyhow::Error::new)?;
-    let parts = SeedParts {
-        seeds: all_seeds.clone(),
-        ..parts
-    };
+    let parts = run_parts(&docs, "paper", paper_signature, all_seeds.clone())?;
     let mut doc = assemble(&parts, args.seeds.shard)?;
     doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
     if all_seeds.len() > 1 {

@@ -30,7 +30,7 @@ use serde::Serialize;
 use serde_json::{Map, Value, json};
 
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, finish_seed_doc, finite_or_null, gather, merge_parts, number_at,
+    SeedArgs, SeedParts, Shard, finish_seed_doc, finite_or_null, merge_parts, number_at, run_parts,
     seed_list, spread_at,
 };
 
@@ -288,10 +288,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
         scenario.name,
         args.episodes,
         seed_list(&seeds),
-        args.seeds
-            .shard
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
-            .unwrap_or_default()
+        args.seeds.shard_note()
     );
     if planners.contains(&PlannerKind::Oracle) {
         eprintln!("{ORACLE_NOTE}");
@@ -372,11 +369,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
             "wall_time_s": wall_s,
         }));
     }
-    let parts = gather(&docs, "place", place_signature).map_err(anyhow::Error::new)?;
-    let parts = SeedParts {
-        seeds: all_seeds,
-        ..parts
-    };
+    let parts = run_parts(&docs, "place", place_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);
@@ -565,26 +558,18 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human table of a place document: one row per planner, each figure as one seed's
 /// value or `mean (min-max)` over the seeds.
 pub fn print_place(doc: &Value, note: &str) {
-    let crate::seeds::SeedLists {
-        docs,
-        all: seeds,
-        own,
-    } = crate::seeds::SeedLists::of(doc);
-    let many = own.len() > 1;
+    let lists = crate::seeds::SeedLists::of(doc);
+    let docs = &lists.docs;
+    let many = lists.own.len() > 1;
     let first = docs.first().copied().unwrap_or(doc);
     let episodes = first["planners"]
         .as_object()
         .and_then(|m| m.values().next())
         .map_or(0.0, |p| number_at(p, &["episodes"]));
     println!(
-        "place `{}`: {episodes} episodes per planner and seed, {} {}{}, tolerance {:.0} mm / {:.0} deg; {note}",
+        "place `{}`: {episodes} episodes per planner and seed, {}, tolerance {:.0} mm / {:.0} deg; {note}",
         doc["scenario"].as_str().unwrap_or("?"),
-        if own.len() == 1 { "seed" } else { "seeds" },
-        seed_list(&own),
-        doc["shard"]
-            .as_str()
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
-            .unwrap_or_default(),
+        lists.describe(),
         number_at(doc, &["tolerance_mm"]),
         number_at(doc, &["tolerance_deg"])
     );

@@ -16,8 +16,8 @@ use crate::bench_tasks::{
     prefix_of, progress, resolve_ag, write_json,
 };
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, gather, merge_parts,
-    number_at, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, merge_parts, number_at,
+    run_parts, seed_list, spread_at,
 };
 use crate::side_by_side::side_by_side;
 use crate::task_goals::{NamedPath, heading_share, path_length};
@@ -288,18 +288,12 @@ pub fn merge(parts: &[Value]) -> Result<Value> {
 /// The human table of a trajectory document: per path each planner's mean error, mean
 /// (min-max) over the seeds, and the ratio; then the overall figures.
 pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
-    let crate::seeds::SeedLists {
-        all: seeds, own, ..
-    } = crate::seeds::SeedLists::of(doc);
+    let lists = crate::seeds::SeedLists::of(doc);
+    let own = &lists.own;
     println!(
-        "trajectory `{}`: {} {}{}; {note}",
+        "trajectory `{}`: {}; {note}",
         doc["scenario"].as_str().unwrap_or("?"),
-        if own.len() == 1 { "seed" } else { "seeds" },
-        seed_list(&own),
-        doc["shard"]
-            .as_str()
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&seeds)))
-            .unwrap_or_default(),
+        lists.describe(),
     );
     println!(
         "mean distance of the centroid to the path per recorded point, mm{}; ends reached",
@@ -380,10 +374,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
             .collect::<Vec<_>>()
             .join(", "),
         seed_list(&seeds),
-        args.seeds
-            .shard
-            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&all_seeds)))
-            .unwrap_or_default()
+        args.seeds.shard_note()
     );
 
     let work: Vec<(u64, PlannerKind)> = seeds
@@ -463,11 +454,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
             wall_s,
         ));
     }
-    let parts = gather(&docs, "trajectory", trajectory_signature).map_err(anyhow::Error::new)?;
-    let parts = SeedParts {
-        seeds: all_seeds,
-        ..parts
-    };
+    let parts = run_parts(&docs, "trajectory", trajectory_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);

@@ -47,6 +47,14 @@ impl Default for SeedArgs {
 }
 
 impl SeedArgs {
+    /// ` (shard I/N of seeds ...)` when this run is a shard, else nothing: what a run's
+    /// first line says after its own seeds.
+    pub fn shard_note(&self) -> String {
+        self.shard
+            .map(|s| format!(" (shard {s} of seeds {})", seed_list(&self.all())))
+            .unwrap_or_default()
+    }
+
     /// One seed, no shard.
     pub fn one(seed: u64) -> Self {
         Self {
@@ -404,6 +412,8 @@ pub struct SeedLists<'a> {
     pub docs: Vec<&'a Value>,
     pub all: Vec<u64>,
     pub own: Vec<u64>,
+    /// `I/N` when the document is a shard's.
+    pub shard: Option<&'a str>,
 }
 
 impl<'a> SeedLists<'a> {
@@ -417,8 +427,41 @@ impl<'a> SeedLists<'a> {
             .map(|a| a.iter().filter_map(Value::as_u64).collect())
             .unwrap_or_default();
         let own = docs.iter().filter_map(|d| d["seed"].as_u64()).collect();
-        Self { docs, all, own }
+        Self {
+            docs,
+            all,
+            own,
+            shard: doc["shard"].as_str(),
+        }
     }
+
+    /// `seed 100`, `seeds 100-104`, and ` (shard I/N of seeds ...)` for a shard's document:
+    /// what a printed table says it covers.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} {}{}",
+            if self.own.len() == 1 { "seed" } else { "seeds" },
+            seed_list(&self.own),
+            self.shard
+                .map(|s| format!(" (shard {s} of seeds {})", seed_list(&self.all)))
+                .unwrap_or_default()
+        )
+    }
+}
+
+/// The parts of a run (or of its shard) over `all_seeds`, from the one-seed documents of
+/// the seeds it ran, checked as a merge checks its parts: what a benchmark assembles its
+/// document from.
+pub fn run_parts(
+    docs: &[Value],
+    benchmark: &str,
+    signature: impl Fn(&Value) -> Value,
+    all_seeds: Vec<u64>,
+) -> Result<SeedParts, MergePartError> {
+    Ok(SeedParts {
+        seeds: all_seeds,
+        ..gather(docs, benchmark, signature)?
+    })
 }
 
 /// `100-104`, or `100, 102` when not a run of consecutive seeds.
