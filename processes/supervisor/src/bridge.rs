@@ -4,7 +4,7 @@
 //! process runs it as a child of `agp up`, with the epoch and token of the slot.
 
 use agp_bridge::{BridgeConfig, BridgeEnd, Endpoint, Side, parse_topics, run_bridge};
-use agp_runtime::{Instance, WaitStrategy};
+use agp_runtime::WaitStrategy;
 use agp_shared_types::{SessionKey, session_token_from_env};
 use anyhow::{Context, Result, anyhow, bail};
 
@@ -55,14 +55,7 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
         _ => bail!("give one of --listen and --connect"),
     };
     let topics = parse_topics(&args.topics)?;
-    let instance = Instance::new(&args.instance)
-        .map_err(|e| anyhow!("bad instance name `{}`: {e}", args.instance))?;
-    if !instance.control_exists() {
-        bail!(
-            "no supervisor runs instance `{}` (start it with `agp up`)",
-            args.instance
-        );
-    }
+    let instance = crate::control::running_instance(&args.instance)?;
     let key = SessionKey::from_env().map_err(|e| anyhow!(e))?;
     let config = BridgeConfig {
         side,

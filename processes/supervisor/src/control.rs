@@ -28,6 +28,20 @@ pub struct InstanceArg {
     pub launch: std::path::PathBuf,
 }
 
+/// The instance named `name`, or one line saying why the name is refused.
+pub fn instance_named(name: &str) -> Result<Instance> {
+    Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))
+}
+
+/// The instance named `name`, which a supervisor must run (its control service is up).
+pub fn running_instance(name: &str) -> Result<Instance> {
+    let instance = instance_named(name)?;
+    if !instance.control_exists() {
+        bail!("no supervisor runs instance `{name}` (start it with `agp up`)");
+    }
+    Ok(instance)
+}
+
 impl InstanceArg {
     /// `--instance`, else the launch file's.
     pub fn name(&self) -> Result<String> {
@@ -230,7 +244,7 @@ pub enum DownOutcome {
 /// supervisor died), removes them, unless a process of the instance still lives: then it
 /// names them and refuses.
 pub fn down(name: &str, timeout: Duration) -> Result<DownOutcome> {
-    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    let instance = instance_named(name)?;
     if !InstanceLock::is_held(&instance) && !instance.files().is_empty() {
         return clean_dead(&instance);
     }

@@ -369,8 +369,7 @@ const DETACHED_ENV: &str = "AGP_DETACHED";
 /// of the supervisor it started (its pid) counts as started.
 fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
     use std::os::unix::process::CommandExt;
-    let instance = agp_runtime::Instance::new(&config.instance)
-        .map_err(|e| anyhow::anyhow!("bad instance name `{}`: {e}", config.instance))?;
+    let instance = crate::control::instance_named(&config.instance)?;
     // Whoever holds the lock is named by it; released at once when no one does.
     drop(InstanceLock::acquire(&instance)?);
     std::fs::create_dir_all(&config.results).with_context(|| {
@@ -643,8 +642,7 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
     const LOOK: Duration = Duration::from_millis(100);
     const SETTLE: Duration = Duration::from_millis(300);
     signals::install().context("cannot install the signal handlers")?;
-    let instance = agp_runtime::Instance::new(name)
-        .map_err(|e| anyhow::anyhow!("bad instance name `{name}`: {e}"))?;
+    let instance = crate::control::instance_named(name)?;
     if file_stamp(path).is_none() {
         anyhow::bail!("--watch {}: no such file", path.display());
     }

@@ -822,8 +822,7 @@ fn ping(ports: &FloorPorts, seconds: f64, pause: Option<&Instance>) -> Result<Fl
 /// `agp profile-floor-pong`: echoes the floor's pings until told to stop.
 pub fn run_floor_pong(args: &FloorPongArgs) -> Result<u8> {
     install_shutdown_handler();
-    let instance = Instance::new(&args.instance)
-        .map_err(|e| anyhow!("bad instance name `{}`: {e}", args.instance))?;
+    let instance = crate::control::instance_named(&args.instance)?;
     let node = instance
         .node("floor-pong", false)
         .map_err(|e| anyhow!("cannot create the floor's node: {e:?}"))?;
@@ -861,7 +860,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         );
     }
     let name = args.target.name()?;
-    let instance = Instance::new(&name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    let instance = crate::control::instance_named(&name)?;
     if !InstanceLock::is_held(&instance) {
         bail!("instance `{name}` is not up (no supervisor holds it): start it with `agp up`");
     }

@@ -6,8 +6,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use agp_recording::{RecordStats, Recorder, RecorderOptions, RunInfo};
-use agp_runtime::Instance;
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, bail};
 
 /// `agp record`.
 #[derive(Debug, clap::Args)]
@@ -52,14 +51,7 @@ pub(crate) fn run(args: &RecordArgs) -> Result<u8> {
     {
         bail!("--seconds must be more than 0 and at most 86400, got {s}");
     }
-    let instance = Instance::new(&args.instance)
-        .map_err(|e| anyhow!("bad instance name `{}`: {e}", args.instance))?;
-    if !instance.control_exists() {
-        bail!(
-            "no supervisor runs instance `{}` (start it with `agp up`)",
-            args.instance
-        );
-    }
+    let instance = crate::control::running_instance(&args.instance)?;
     let info = run_info(args)?;
     let options = RecorderOptions {
         run: info.to_metadata(),

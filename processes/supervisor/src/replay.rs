@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use agp_harness::evaluation::TruthRecorder;
 use agp_recording::{Recording, ReplayAction, ReplayScript, RunInfo, same_sensing};
-use agp_runtime::{DriveError, Instance, LockstepDriver, TruthAccess};
+use agp_runtime::{DriveError, LockstepDriver, TruthAccess};
 use agp_shared_types::{GroundTruth, Pose2};
 use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
@@ -183,8 +183,7 @@ pub(crate) fn drive(args: &DriverArgs) -> Result<u8> {
     agp_runtime::install_shutdown_handler();
     let recording = Recording::open(&args.file)?;
     let script = ReplayScript::from_recording(&recording)?;
-    let instance = Instance::new(&args.instance)
-        .map_err(|e| anyhow!("bad instance name `{}`: {e}", args.instance))?;
+    let instance = crate::control::instance_named(&args.instance)?;
     // The judge's own means: its truth recorder, on a node of its own, subscribed before
     // the first command.
     let judge_node = instance

@@ -190,8 +190,7 @@ pub fn up(config: &LaunchConfig) -> Result<u8> {
     let log = Log {
         start: Instant::now(),
     };
-    let instance = Instance::new(&config.instance)
-        .map_err(|e| anyhow!("bad instance name `{}`: {e}", config.instance))?;
+    let instance = crate::control::instance_named(&config.instance)?;
     let mut lock = InstanceLock::acquire(&instance)?;
 
     clean_leftovers(&instance, &log)?;

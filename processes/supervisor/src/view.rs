@@ -79,8 +79,7 @@ pub fn run(args: &ViewArgs) -> Result<u8> {
         }
         None => {
             let name = args.target.name()?;
-            let instance =
-                Instance::new(&name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+            let instance = crate::control::instance_named(&name)?;
             if !instance.control_exists() {
                 return Err(ViewError::NotUp(name).into());
             }
