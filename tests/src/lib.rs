@@ -534,6 +534,24 @@ pub fn status_entry<'a>(status: &'a Value, name: &str) -> &'a Value {
         .unwrap_or(&Value::Null)
 }
 
+/// Every step of a physics step log (`StepLog`: step, epoch) from the first to the last was
+/// applied exactly once, and the epochs never went back.
+#[track_caller]
+pub fn assert_every_step_applied_once(log: &[(u64, u64)]) {
+    assert!(log.len() > 100, "only {} steps were applied", log.len());
+    for (k, w) in log.windows(2).enumerate() {
+        assert_eq!(
+            w[1].0,
+            w[0].0 + 1,
+            "line {}: step {} follows step {}: a step was lost or applied twice",
+            k + 2,
+            w[1].0,
+            w[0].0
+        );
+        assert!(w[1].1 >= w[0].1, "line {}: the epoch went back", k + 2);
+    }
+}
+
 /// The verdict `agp up` wrote for the placement run of instance `instance` into
 /// `results`, checked: success, and both errors within the tolerance of the built-in
 /// scenario `scenario`. `stdout` (the run's) goes into the failure message. Returns the

@@ -12,8 +12,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use agp_tests::{
-    AgpUp, LaunchDir, StepLog, assert_placed, count_instance_files, learned_ag, run_agp,
-    status_json,
+    AgpUp, Finished, LaunchDir, StepLog, assert_every_step_applied_once, assert_placed,
+    count_instance_files, learned_ag, run_agp, status_json,
 };
 use serde_json::Value;
 
@@ -53,22 +53,6 @@ fn planner_launch(instance: &str, port: u16) -> String {
     )
 }
 
-/// Every step from the first to the last was applied exactly once.
-#[track_caller]
-fn assert_every_step_applied_once(log: &[(u64, u64)]) {
-    assert!(log.len() > 100, "only {} steps were applied", log.len());
-    for (k, w) in log.windows(2).enumerate() {
-        assert_eq!(
-            w[1].0,
-            w[0].0 + 1,
-            "line {}: step {} follows step {}: a step was lost or applied twice",
-            k + 2,
-            w[1].0,
-            w[0].0
-        );
-    }
-}
-
 #[test]
 fn a_planner_in_another_instance_joined_only_by_the_bridge_places_the_object() {
     let _shared = MACHINE.read().unwrap_or_else(|e| e.into_inner());
@@ -82,23 +66,7 @@ fn a_planner_in_another_instance_joined_only_by_the_bridge_places_the_object() {
     let up_b = AgpUp::start(&planner.launch(), &[]);
     let end_b = up_b.wait(PLACE_TIMEOUT);
     let end_a = up_a.wait(TIMEOUT);
-    println!(
-        "A:\n{}\n{}\nB:\n{}\n{}",
-        end_a.stdout, end_a.stderr, end_b.stdout, end_b.stderr
-    );
-    assert!(
-        end_b.stdout.contains("run over: `planner` finished it"),
-        "B:\n{}\n{}",
-        end_b.stdout,
-        end_b.stderr
-    );
-    assert_eq!(
-        end_a.status.code(),
-        Some(0),
-        "A:\n{}\n{}",
-        end_a.stdout,
-        end_a.stderr
-    );
+    assert_placement_ran_out(&end_a, &end_b);
     assert!(
         end_a.stdout.contains("run over: `planner` finished it"),
         "{}",
@@ -124,6 +92,29 @@ fn a_planner_in_another_instance_joined_only_by_the_bridge_places_the_object() {
     println!(
         "placed across the bridge: {} steps, final error {mm:.1} mm, {deg:.1} deg",
         log.len()
+    );
+}
+
+/// Both halves of a placement across the bridge ended as they should: B's planner finished
+/// the run, and A (its bridge told that the far end stopped) exited with status 0.
+#[track_caller]
+fn assert_placement_ran_out(end_a: &Finished, end_b: &Finished) {
+    println!(
+        "A:\n{}\n{}\nB:\n{}\n{}",
+        end_a.stdout, end_a.stderr, end_b.stdout, end_b.stderr
+    );
+    assert!(
+        end_b.stdout.contains("run over: `planner` finished it"),
+        "B:\n{}\n{}",
+        end_b.stdout,
+        end_b.stderr
+    );
+    assert_eq!(
+        end_a.status.code(),
+        Some(0),
+        "A:\n{}\n{}",
+        end_a.stdout,
+        end_a.stderr
     );
 }
 
@@ -168,23 +159,7 @@ fn a_swap_of_the_remote_planner_during_a_placement_across_the_bridge_still_reach
     swap_the_planner(planner.path(), b);
     let end_b = up_b.wait(PLACE_TIMEOUT);
     let end_a = up_a.wait(TIMEOUT);
-    println!(
-        "A:\n{}\n{}\nB:\n{}\n{}",
-        end_a.stdout, end_a.stderr, end_b.stdout, end_b.stderr
-    );
-    assert!(
-        end_b.stdout.contains("run over: `planner` finished it"),
-        "B:\n{}\n{}",
-        end_b.stdout,
-        end_b.stderr
-    );
-    assert_eq!(
-        end_a.status.code(),
-        Some(0),
-        "A:\n{}\n{}",
-        end_a.stdout,
-        end_a.stderr
-    );
+    assert_placement_ran_out(&end_a, &end_b);
     let log = log.poll().to_vec();
     assert_every_step_applied_once(&log);
     let verdict: Value = serde_json::from_str(

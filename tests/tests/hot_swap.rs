@@ -8,8 +8,9 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agp_tests::{
-    AgpUp, DownOnPanic, LaunchDir, StepLog, assert_placed, bin_path, count_instance_files,
-    learned_ag, process_is_gone, run_agp, status_entry, status_json,
+    AgpUp, DownOnPanic, LaunchDir, StepLog, assert_every_step_applied_once, assert_placed,
+    bin_path, count_instance_files, learned_ag, process_is_gone, run_agp, status_entry,
+    status_json,
 };
 use serde_json::Value;
 
@@ -42,24 +43,6 @@ fn step_log(dir: &Path) -> Vec<(u64, u64)> {
             (it.next().expect("step"), it.next().expect("epoch"))
         })
         .collect()
-}
-
-/// Every step from the first to the last was applied exactly once, and the epochs never
-/// went back.
-#[track_caller]
-fn assert_every_step_applied_once(log: &[(u64, u64)]) {
-    assert!(log.len() > 100, "only {} steps were applied", log.len());
-    for (k, w) in log.windows(2).enumerate() {
-        assert_eq!(
-            w[1].0,
-            w[0].0 + 1,
-            "line {}: step {} follows step {}: a step was lost or applied twice",
-            k + 2,
-            w[1].0,
-            w[0].0
-        );
-        assert!(w[1].1 >= w[0].1, "line {}: the epoch went back", k + 2);
-    }
 }
 
 /// Polls `agp status` (the outcome, not the time it takes) until `ok` holds for it.
