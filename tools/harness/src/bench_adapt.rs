@@ -48,8 +48,8 @@ use crate::bench_learn::{self, BenchLearnArgs};
 use crate::bench_tasks::write_json;
 use crate::in_process::InProcessWorld;
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, merge_parts, number_at,
-    run_parts, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, mean_of, merge_parts,
+    number_at, run_parts, seed_list, spread_at,
 };
 use crate::side_by_side::side_by_side;
 use crate::task_goals::{median, place_goals};
@@ -513,11 +513,6 @@ fn adapt_signature(doc: &Value) -> Value {
     };
     sig.insert("ag".into(), ag);
     Value::Object(sig)
-}
-
-/// The mean of the finite `values`; NaN when none is.
-fn mean_of(values: &[f64]) -> f64 {
-    Spread::of(values).map_or(f64::NAN, |s| s.mean)
 }
 
 /// One condition over the seeds: each figure's mean over the seeds (`pushes_to_recover`

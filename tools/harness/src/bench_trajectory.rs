@@ -16,8 +16,8 @@ use crate::bench_tasks::{
     prefix_of, progress, resolve_ag, write_json,
 };
 use crate::seeds::{
-    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, merge_parts, number_at,
-    run_parts, seed_list, spread_at,
+    SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, mean_of, merge_parts,
+    number_at, run_parts, seed_list, spread_at,
 };
 use crate::side_by_side::side_by_side;
 use crate::task_goals::{NamedPath, heading_share, path_length};
@@ -174,11 +174,6 @@ fn trajectory_signature(doc: &Value) -> Value {
         "keep_heading_deg": doc["keep_heading_deg"],
         "paths": paths,
     })
-}
-
-/// The mean of the finite `values`; NaN when none is.
-fn mean_of(values: &[f64]) -> f64 {
-    Spread::of(values).map_or(f64::NAN, |s| s.mean)
 }
 
 /// The trajectory document of `parts`: per path and planner the mean error over the seeds

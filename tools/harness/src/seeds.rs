@@ -405,6 +405,11 @@ fn differences(sig: &Value, first: &Value) -> String {
     }
 }
 
+/// The mean of the finite `values`; NaN when none is.
+pub fn mean_of(values: &[f64]) -> f64 {
+    Spread::of(values).map_or(f64::NAN, |s| s.mean)
+}
+
 /// What a benchmark document says of its seeds: its one-seed documents (`per_seed`), every
 /// seed of the run (`seeds`, a shard's whole run included) and the seeds this document
 /// holds itself (each `per_seed` entry's `seed`).
