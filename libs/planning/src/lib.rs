@@ -22,7 +22,7 @@ pub use learning_protocol::{
 };
 pub use push_choice::{
     Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at,
-    path_projection, symmetric_angle_error,
+    path_offset, path_projection, symmetric_angle_error,
 };
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use travel::{

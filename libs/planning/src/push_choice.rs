@@ -293,12 +293,23 @@ pub struct PathFollowing<'p> {
     pub heading_tolerance_rad: Option<f64>,
     /// Metres of cost per radian of heading beyond its tolerance.
     pub heading_weight_m_per_rad: f64,
+    /// Keep the centroid this far (m) to the path's left (negative: its right) instead of
+    /// on it: how the planner cancels a bias of the pushes it makes, which the circlings
+    /// measure (see `EpisodeConfig::cross_track_gain`).
+    pub offset_m: f64,
 }
 
 /// The arc length (m) along `path` of the point of it closest to `p`, and the distance
 /// (m) of `p` to it.
 pub fn path_projection(path: &[DVec2], p: DVec2) -> (f64, f64) {
-    let (mut best_d, mut best_s, mut s0) = (f64::INFINITY, 0.0, 0.0);
+    let (s, d) = path_offset(path, p);
+    (s, d.abs())
+}
+
+/// [`path_projection`] with the distance signed: positive on the path's left (of the
+/// direction of the closest segment), negative on its right.
+pub fn path_offset(path: &[DVec2], p: DVec2) -> (f64, f64) {
+    let (mut best_d, mut best_s, mut best_side, mut s0) = (f64::INFINITY, 0.0, 1.0, 0.0);
     for w in path.windows(2) {
         let (a, b) = (w[0], w[1]);
         let ab = b - a;
@@ -312,13 +323,14 @@ pub fn path_projection(path: &[DVec2], p: DVec2) -> (f64, f64) {
         if d < best_d {
             best_d = d;
             best_s = s0 + t * len;
+            best_side = if ab.perp_dot(p - a) < 0.0 { -1.0 } else { 1.0 };
         }
         s0 += len;
     }
     if path.len() == 1 {
         return (0.0, (p - path[0]).length());
     }
-    (best_s, best_d)
+    (best_s, best_side * best_d)
 }
 
 /// The direction (rad) of `path` at arc length `s` (its last segment's beyond the end).
@@ -369,9 +381,11 @@ impl PushPlanner<'_> {
                     let c1 = c0 + moved;
                     let mut track = 0.0;
                     for k in 1..=4 {
-                        track += path_projection(follow.path, c0 + moved * (f64::from(k) / 4.0)).1;
+                        let at = c0 + moved * (f64::from(k) / 4.0);
+                        track += (path_offset(follow.path, at).1 - follow.offset_m).abs();
                     }
-                    let (s1, d1) = path_projection(follow.path, c1);
+                    let (s1, d1) = path_offset(follow.path, c1);
+                    let d1 = (d1 - follow.offset_m).abs();
                     let rotation = p.rotation_rad * scale;
                     let risk = s.spread_weight
                         * scale
@@ -441,6 +455,10 @@ mod tests {
             (s - 0.1).abs() < 1e-12 && (d - 0.02).abs() < 1e-12,
             "{s} {d}"
         );
+        // Signed: left of the first leg (heading +x) is +y, right of the second (+y) is +x.
+        assert!((path_offset(&path, DVec2::new(0.1, 0.02)).1 - 0.02).abs() < 1e-12);
+        assert!((path_offset(&path, DVec2::new(0.1, -0.02)).1 + 0.02).abs() < 1e-12);
+        assert!((path_offset(&path, DVec2::new(0.33, 0.05)).1 + 0.03).abs() < 1e-12);
         // Beside the second leg: 0.3 along the first, 0.05 up the second.
         let (s, d) = path_projection(&path, DVec2::new(0.33, 0.05));
         assert!(

@@ -59,6 +59,12 @@ fn main() -> anyhow::Result<()> {
     if let Some(v) = env("HEADW") {
         config.heading_weight_m_per_rad = v * 1e-3 * 180.0 / std::f64::consts::PI;
     }
+    if let Some(v) = env("XTG") {
+        config.cross_track_gain = v;
+    }
+    if let Some(v) = env("XTL") {
+        config.cross_track_leak = v;
+    }
     if let Some(v) = env("PROG") {
         config.progress_weight = v;
     }
