@@ -4,8 +4,8 @@ use glam::DVec2;
 use crate::Grid;
 
 /// Least interpolated push weight (sum of unit-peak Gaussians) at a contact point for
-/// [`AffordanceGradient::predict`] to answer: about one trial 3.3 sigma (11 mm at the
-/// default 3.5 mm push sigma) away.
+/// [`AffordanceGradient::predict`] to answer: about one trial 3.3 sigma (8 mm at the
+/// default 2.5 mm push sigma) away.
 pub const MIN_PREDICTION_EVIDENCE: f64 = 0.005;
 
 /// Fraction of the largest value of the combined shape gradient above which

@@ -111,7 +111,42 @@ impl<'a> PushPredictor<'a> {
         let t = (alpha_deg - a.alpha_deg) / (b.alpha_deg - a.alpha_deg);
         AffordanceGradient::blend(a.predict(ca), b.predict(cb), t)
     }
+
+    /// [`PushPredictor::predict`], or where the gradient has too little evidence at the
+    /// aim point (no trial's aim point within about 3 sigma), the prediction at the nearest
+    /// point within `max_distance_m` that has it (searched in 1 mm rings, 16 directions
+    /// each), with confidence 0: a planner that skips unconfident predictions never picks
+    /// the push, but a user asking what it would do gets the nearest learned effect.
+    /// `None` only when nothing within `max_distance_m` has evidence. Allocates nothing.
+    pub fn predict_nearest(
+        &self,
+        contact_point_obj: DVec2,
+        alpha_deg: f64,
+        max_distance_m: f64,
+    ) -> Option<Prediction> {
+        if let Some(p) = self.predict(contact_point_obj, alpha_deg) {
+            return Some(p);
+        }
+        let rings = (max_distance_m / NEAREST_RING_STEP_M).floor() as u32;
+        (1..=rings)
+            .flat_map(|r| {
+                (0..NEAREST_DIRECTIONS).map(move |k| {
+                    let angle = std::f64::consts::TAU * f64::from(k) / f64::from(NEAREST_DIRECTIONS);
+                    contact_point_obj + DVec2::from_angle(angle) * (f64::from(r) * NEAREST_RING_STEP_M)
+                })
+            })
+            .find_map(|c| self.predict(c, alpha_deg))
+            .map(|p| Prediction {
+                confidence: 0.0,
+                ..p
+            })
+    }
 }
+
+/// Ring spacing of [`PushPredictor::predict_nearest`]'s search, m.
+const NEAREST_RING_STEP_M: f64 = 0.001;
+/// Directions per ring of [`PushPredictor::predict_nearest`]'s search.
+const NEAREST_DIRECTIONS: u32 = 16;
 
 /// The first crossing of the line from `origin` along the unit vector `dir` with the border
 /// that `shape` (normalised S) marks: the centre of the first band of samples at or above

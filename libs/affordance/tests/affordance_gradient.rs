@@ -53,9 +53,9 @@ fn learned() -> AffordanceGradient {
 
 #[test]
 fn predictions_between_trials_match_the_analytic_model() {
-    // Tolerances: the Gaussian-weighted mean (push sigma 3.5 mm, trials 4.2 mm apart on the
+    // Tolerances: the Gaussian-weighted mean (push sigma 2.5 mm, trials 4.2 mm apart on the
     // circle) smooths the model along the border with a bias of about sigma^2 / 2 * f'':
-    // 0.08 mm for the displacement (|f''| = 20 mm / R^2), 0.07 deg for the rotation. In alpha
+    // 0.04 mm for the displacement (|f''| = 20 mm / R^2), 0.04 deg for the rotation. In alpha
     // the model's displacement turns along an arc that the linear interpolation cuts by
     // 20 mm * (1 - cos 3.75 deg) = 0.04 mm; its rotation is linear in alpha.
     let ag = learned();

@@ -68,9 +68,9 @@ fn at_a_learned_alpha_the_predictor_answers_as_the_gradient_does() {
 
 #[test]
 fn between_learned_alphas_the_predictor_follows_the_pushes_of_one_start() {
-    // The learned layers smooth the model along the border (push sigma 3.5 mm, about 5 deg
-    // of the disc): the three-per-lap rotation loses about 1 - exp(-(3 * 0.0875)^2 / 2) =
-    // 3.4 % of its 23 deg amplitude, 0.8 deg, at a learned alpha as between them. The
+    // The learned layers smooth the model along the border (push sigma 2.5 mm, about 3.6
+    // deg of the disc): the three-per-lap rotation loses about 1 - exp(-(3 * 0.0625)^2 / 2)
+    // = 1.7 % of its 23 deg amplitude, 0.4 deg, at a learned alpha as between them. The
     // predictor adds little to that; interpolating at a fixed aim point mixes pushes that
     // started 20 deg apart, where the rotation differs by up to 24 deg.
     let ag = learned();

@@ -80,8 +80,8 @@ fn arrows_are_drawn_in_the_position_panels_only() {
         let end = cuts.get(k + 1).map_or(svg.len(), |c| c.0);
         let heads = svg[*at..end].matches("<polygon").count();
         if name == "P" {
-            // 24 pushes round a 40 mm disc with 3.5 mm push sigma: a ring of predictions
-            // about 22 mm wide; arrows every few cells on it.
+            // 24 pushes round a 40 mm disc with 2.5 mm push sigma: a ring of predictions
+            // about 16 mm wide; arrows every few cells on it.
             assert!(heads >= 20, "a P panel has arrows, found {heads}");
         } else {
             assert_eq!(heads, 0, "a {name} panel has no arrows");

@@ -336,9 +336,10 @@ const LEARN_MEAN_FIGURES: [[&str; 2]; 5] = [
 ];
 
 /// Counts of an object, summed over the seeds.
-const LEARN_SUMMED: [&[&str]; 5] = [
+const LEARN_SUMMED: [&[&str]; 6] = [
     &["prediction", "pushes"],
     &["prediction", "unpredicted"],
+    &["prediction", "from_nearest"],
     &["pose", "circlings"],
     &["trials"],
     &["trials_learned"],
@@ -739,8 +740,8 @@ fn table(job: &Job, r: &ObjectReport, wall_s: f64) -> String {
     }
     let p = &r.prediction;
     line(format!(
-        "prediction of {} unseen pushes (random contact, alpha in [-15, +15] deg), {} without a prediction:",
-        p.pushes, p.unpredicted
+        "prediction of {} unseen pushes (random contact, alpha in [-15, +15] deg), {} without a prediction, {} from the nearest learned point:",
+        p.pushes, p.unpredicted, p.from_nearest
     ));
     line(format!(
         "  median displacement error  {} mm ({} of the true displacement)",
@@ -840,6 +841,7 @@ fn object_json(
             "median_rotation_error_deg": finite(p.rotation_error_deg.median),
             "pushes": p.pushes,
             "unpredicted": p.unpredicted,
+            "from_nearest": p.from_nearest,
         },
         "pose": {
             "median_position_error_mm": finite(r.pose_position_mm.median),

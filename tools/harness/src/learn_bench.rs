@@ -345,8 +345,12 @@ impl Spread {
 pub struct PredictionStats {
     /// Pushes evaluated (contact made).
     pub pushes: usize,
-    /// Pushes the gradient had no prediction for (no evidence at the contact point).
+    /// Pushes the gradient had no prediction for (no evidence within
+    /// [`NEAREST_EVIDENCE_M`] of the contact point).
     pub unpredicted: usize,
+    /// Pushes predicted from the nearest point with evidence, the aim point having too
+    /// little ([`PushPredictor::predict_nearest`]); counted in the errors.
+    pub from_nearest: usize,
     /// |predicted - true displacement|, mm.
     pub displacement_error_mm: Spread,
     /// The same as a fraction of the true displacement.
@@ -1182,6 +1186,11 @@ struct EvalPush {
 }
 
 /// How `g` predicts `samples`, queried at the contact point `key` gives.
+/// How far from an unseen push's aim point the gradient's nearest evidence may lie for the
+/// push to be predicted from it: two trials' spacing along the border (60 trials round
+/// the object come about 5 mm apart).
+pub const NEAREST_EVIDENCE_M: f64 = 0.01;
+
 fn predict_all(
     g: &PushPredictor<'_>,
     samples: &[EvalPush],
@@ -1193,10 +1202,14 @@ fn predict_all(
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for e in samples {
         stats.pushes += 1;
-        let Some(p) = key(e).and_then(|c| g.predict(c, e.alpha_deg)) else {
+        let Some(p) = key(e).and_then(|c| g.predict_nearest(c, e.alpha_deg, NEAREST_EVIDENCE_M))
+        else {
             stats.unpredicted += 1;
             continue;
         };
+        if p.confidence == 0.0 {
+            stats.from_nearest += 1;
+        }
         let err = (p.displacement - e.displacement_obj).length();
         de.push(err * 1e3);
         dr.push(err / e.displacement_obj.length().max(1e-6));
