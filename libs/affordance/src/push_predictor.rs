@@ -131,8 +131,10 @@ impl<'a> PushPredictor<'a> {
         (1..=rings)
             .flat_map(|r| {
                 (0..NEAREST_DIRECTIONS).map(move |k| {
-                    let angle = std::f64::consts::TAU * f64::from(k) / f64::from(NEAREST_DIRECTIONS);
-                    contact_point_obj + DVec2::from_angle(angle) * (f64::from(r) * NEAREST_RING_STEP_M)
+                    let angle =
+                        std::f64::consts::TAU * f64::from(k) / f64::from(NEAREST_DIRECTIONS);
+                    contact_point_obj
+                        + DVec2::from_angle(angle) * (f64::from(r) * NEAREST_RING_STEP_M)
                 })
             })
             .find_map(|c| self.predict(c, alpha_deg))

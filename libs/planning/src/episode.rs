@@ -750,7 +750,8 @@ impl<W: World> Episode<'_, '_, W> {
                 self.cross_track.circlings = self.circlings;
                 if let Task::Trajectory { path, .. } = self.task {
                     let error = path_offset(path, est.position()).1;
-                    self.cross_track.sum_m = config.cross_track_leak * self.cross_track.sum_m + error;
+                    self.cross_track.sum_m =
+                        config.cross_track_leak * self.cross_track.sum_m + error;
                 }
             }
             if est.pushes_since == 0

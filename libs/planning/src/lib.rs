@@ -21,8 +21,8 @@ pub use learning_protocol::{
     LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun, max_object_reach_m,
 };
 pub use push_choice::{
-    Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at,
-    path_offset, path_projection, symmetric_angle_error,
+    Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at, path_offset,
+    path_projection, symmetric_angle_error,
 };
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use travel::{

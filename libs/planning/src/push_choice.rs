@@ -470,6 +470,68 @@ mod tests {
         assert!(s.abs() < 1e-12 && (d - 0.05).abs() < 1e-12, "{s} {d}");
     }
 
+    /// A disc of radius 40 mm that every push (alphas 0 and +-15) moves 30 mm along the
+    /// push's heading, without turning it: pushes are learned every 3 deg round it from
+    /// the start circle of radius 100 mm.
+    fn sliding_disc() -> AffordanceGradient {
+        use agp_affordance::{AffordanceLearner, LearnerConfig, PushOutcome};
+        let config = LearnerConfig::default();
+        let mut learner = AffordanceLearner::new("disc", &config).expect("learner");
+        for &alpha in &config.alphas_deg {
+            for k in 0..360 {
+                let p = 0.04 * DVec2::from_angle(f64::from(k).to_radians());
+                learner.add_border_point(alpha, p).expect("border point");
+            }
+            for k in 0..120 {
+                let phi = f64::from(3 * k).to_radians();
+                let c = 0.04 * DVec2::from_angle(phi);
+                let Some((_, heading)) = approach_start(c, alpha, 0.1) else {
+                    continue;
+                };
+                let push = PushOutcome {
+                    contact_point_obj: c,
+                    displacement_obj: 0.03 * DVec2::from_angle(heading),
+                    rotation_rad: 0.0,
+                };
+                learner.add_push(alpha, &push).expect("push");
+            }
+        }
+        learner.into_gradient()
+    }
+
+    #[test]
+    fn a_path_offset_moves_the_planned_track_by_the_offset() {
+        let ag = sliding_disc();
+        let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
+        let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
+        // The disc sits 2 mm left of the path; a full push moves it 30 mm.
+        let from = Pose2::new(0.0, 0.002, 0.0);
+        let end = |offset_m: f64| {
+            let follow = PathFollowing {
+                path: &path,
+                push_fractions: &[1.0],
+                advance_m: 0.03,
+                track_weight: 3.0,
+                progress_weight: 0.5,
+                heading_tolerance_rad: None,
+                heading_weight_m_per_rad: 0.0,
+                offset_m,
+            };
+            let plan = planner.plan_along(from, &follow).expect("a push");
+            DVec2::new(plan.predicted.x, plan.predicted.y)
+        };
+        // On the path the push heads back to it; 3 mm to the right, past it by that much.
+        let on = end(0.0);
+        let right = end(-0.003);
+        assert!(on.y.abs() < 0.001, "ends {:.2} mm off the path", on.y * 1e3);
+        assert!(
+            (right.y + 0.003).abs() < 0.001,
+            "ends {:.2} mm off the path, 3 mm to its right asked",
+            right.y * 1e3
+        );
+        assert!(on.x > 0.025 && right.x > 0.025, "{on} {right}");
+    }
+
     #[test]
     fn the_path_direction_is_its_segments_and_the_last_beyond_the_end() {
         let path = [DVec2::ZERO, DVec2::new(0.3, 0.0), DVec2::new(0.3, 0.2)];

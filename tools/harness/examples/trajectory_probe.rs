@@ -4,7 +4,9 @@
 //! `cargo run -p agp-harness --example trajectory_probe -- AG_FILE FIRST_SEED SEEDS [PLANNERS]`
 //! (PLANNERS: comma-separated, default `affordance,baseline`). Environment: `PATHS`
 //! (comma-separated names), `AGP_TRACE`, and overrides of the episode config: `LOOK` (m),
-//! `STEER` (deg, 0 off), `TRACK` (track weight), `ADV` (m), `PROG`, `FOLLOW` (0 off), `ROTW`, `SPREAD`, `FRACS`.
+//! `STEER` (deg, 0 off), `TRACK` (track weight), `ADV` (m), `PROG`, `FOLLOW` (0 off), `ROTW`,
+//! `SPREAD`, `FRACS`, `HEAD` and `HEADW` (heading tolerance and weight, deg), `XTG` and
+//! `XTL` (the cross-track integral's gain and leak).
 
 use agp_affordance::AffordanceGradient;
 use agp_harness::run_episode;

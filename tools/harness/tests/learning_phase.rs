@@ -6,11 +6,12 @@
 //! 20 % of the true displacement, pose from one circling within 5 mm and 5 deg (medians).
 //!
 //! The triangle meets them on every seed of 1-10. The L does not: over seeds 1-10 (`agp
-//! bench learn --seed N`, the shape circling started outside the grid as every learner
-//! does) its median rotation error ran 4.42-5.72 deg (over 5 on 6 seeds), its
-//! displacement ratio 0.138-0.236 (over 0.2 on 5), and 1 of 200 unseen pushes went
-//! unpredicted on 3 seeds. Its test holds it to that measured spread: 6 deg, 0.25 and one
-//! unpredicted push, the paper's own targets being reported as missed by the benchmark.
+//! bench learn --first-seed 1 --seeds 10`, push sigma 2.5 mm, the shape circling started
+//! outside the grid as every learner does) its median rotation error ran 3.98-5.07 deg
+//! (over 5 on 1 seed), its displacement ratio 0.134-0.238 (over 0.2 on 2), and 1 of 200
+//! unseen pushes went unpredicted on 3 seeds (its heading line met no learned border).
+//! Its test holds it to that measured spread: 5.5 deg, 0.25 and one unpredicted push, the
+//! paper's own targets being reported as missed by the benchmark.
 
 use agp_harness::learn_bench::{LearnBenchConfig, ObjectReport, format_report, run_object};
 use agp_world::Scenario;
@@ -54,9 +55,9 @@ fn misses(r: &ObjectReport) -> Vec<String> {
 fn lshape_misses(r: &ObjectReport) -> Vec<String> {
     let p = &r.prediction;
     let mut out = Vec::new();
-    if !within(p.rotation_error_deg.median, 6.0) {
+    if !within(p.rotation_error_deg.median, 5.5) {
         out.push(format!(
-            "median rotation error {:.2} deg > 6",
+            "median rotation error {:.2} deg > 5.5",
             p.rotation_error_deg.median
         ));
     }
