@@ -345,8 +345,9 @@ impl Spread {
 pub struct PredictionStats {
     /// Pushes evaluated (contact made).
     pub pushes: usize,
-    /// Pushes the gradient had no prediction for (no evidence within
-    /// [`NEAREST_EVIDENCE_M`] of the contact point).
+    /// Pushes the gradient had no prediction for: no contact point to key it by (for the
+    /// heading line: it met no learned border), or no evidence within
+    /// [`NEAREST_EVIDENCE_M`] of it.
     pub unpredicted: usize,
     /// Pushes predicted from the nearest point with evidence, the aim point having too
     /// little ([`PushPredictor::predict_nearest`]); counted in the errors.
@@ -1186,12 +1187,12 @@ struct EvalPush {
     rotation_rad: f64,
 }
 
-/// How `g` predicts `samples`, queried at the contact point `key` gives.
 /// How far from an unseen push's aim point the gradient's nearest evidence may lie for the
 /// push to be predicted from it: two trials' spacing along the border (60 trials round
 /// the object come about 5 mm apart).
 pub const NEAREST_EVIDENCE_M: f64 = 0.01;
 
+/// How `g` predicts `samples`, queried at the contact point `key` gives.
 fn predict_all(
     g: &PushPredictor<'_>,
     samples: &[EvalPush],
