@@ -504,7 +504,7 @@ pub fn drive_episode<W: World>(
         last_estimate: None,
         resume: None,
         newer: None,
-        cross_track: CrossTrack::default(),
+        cross_track_m: 0.0,
     };
     let mut end = episode.run()?;
     // Online learning: the episode stopped between two pushes for a newer gradient from
@@ -521,7 +521,7 @@ pub fn drive_episode<W: World>(
             circlings,
             last_estimate,
             resume,
-            cross_track,
+            cross_track_m,
             ..
         } = episode;
         drop(brain);
@@ -541,7 +541,7 @@ pub fn drive_episode<W: World>(
             last_estimate,
             resume,
             newer: None,
-            cross_track,
+            cross_track_m,
         };
         end = episode.run()?;
     }
@@ -689,21 +689,14 @@ struct Episode<'a, 'g, W: World> {
     resume: Option<Estimate>,
     /// Online learning: the newer gradient the episode stopped for, between two pushes.
     newer: Option<AffordanceGradient>,
-    cross_track: CrossTrack,
+    /// Integral action along a path: the leaky sum of the signed cross-track errors the
+    /// circlings measured, m (see [`EpisodeConfig::cross_track_gain`]).
+    cross_track_m: f64,
 }
 
 /// The largest offset (m) from the path that the integral action asks for (see
 /// [`EpisodeConfig::cross_track_gain`]).
 pub const MAX_CROSS_TRACK_OFFSET_M: f64 = 0.005;
-
-/// Integral action along a path (see [`EpisodeConfig::cross_track_gain`]).
-#[derive(Debug, Clone, Copy, Default)]
-struct CrossTrack {
-    /// The leaky sum of the circlings' signed cross-track errors, m.
-    sum_m: f64,
-    /// The circlings counted so far.
-    circlings: u32,
-}
 
 /// Converts the turn penalty (metres per radian of turn) of a steered push into radians
 /// of heading error: a heading error of e radians puts the centroid about e times this
@@ -746,14 +739,6 @@ impl<W: World> Episode<'_, '_, W> {
                 est = Estimate::fresh(self.oracle_truth()?);
             }
             self.last_estimate = Some(est.pose);
-            if est.pushes_since == 0 && self.circlings != self.cross_track.circlings {
-                self.cross_track.circlings = self.circlings;
-                if let Task::Trajectory { path, .. } = self.task {
-                    let error = path_offset(path, est.position()).1;
-                    self.cross_track.sum_m =
-                        config.cross_track_leak * self.cross_track.sum_m + error;
-                }
-            }
             if est.pushes_since == 0
                 && let Some(before) = self.planned_from.take()
             {
@@ -990,7 +975,7 @@ impl<W: World> Episode<'_, '_, W> {
                                 push_fractions: &c.path_push_fractions,
                                 heading_tolerance_rad: *keep_heading_rad,
                                 heading_weight_m_per_rad: c.heading_weight_m_per_rad,
-                                offset_m: (-c.cross_track_gain * self.cross_track.sum_m)
+                                offset_m: (-c.cross_track_gain * self.cross_track_m)
                                     .clamp(-MAX_CROSS_TRACK_OFFSET_M, MAX_CROSS_TRACK_OFFSET_M),
                             },
                         )
@@ -1211,6 +1196,11 @@ impl<W: World> Episode<'_, '_, W> {
                     p.pose.theta.to_degrees(),
                     guess.map(|p| (p.x * 1e3, p.y * 1e3, p.theta.to_degrees())),
                 ));
+                if let Task::Trajectory { path, .. } = self.task {
+                    let error = path_offset(path, DVec2::new(p.pose.x, p.pose.y)).1;
+                    self.cross_track_m =
+                        self.run.config.cross_track_leak * self.cross_track_m + error;
+                }
                 Ok(Some(Estimate::fresh(p.pose)))
             }
             Brain::Baseline { radius } => {
