@@ -174,7 +174,15 @@ GRID_PUSH_WEIGHT = 5
 GRID_ROTATION = 6
 GRID_DISPLACEMENT_SQ_MEAN = 7
 GRID_ROTATION_SQ_MEAN = 8
-GRIDS_PER_ALPHA = 11
+# The same statistics of the pushes that meet the border past the centroid (payloads.rs,
+# `GridKind`): a planner pushing from the start circle's nearest point never needs them.
+GRID_PAST_PUSH_WEIGHT = 11
+GRID_PAST_POSITION_X = 12
+GRID_PAST_POSITION_Y = 13
+GRID_PAST_ROTATION = 14
+GRID_PAST_DISPLACEMENT_SQ_MEAN = 15
+GRID_PAST_ROTATION_SQ_MEAN = 16
+GRIDS_PER_ALPHA = 17
 
 
 class GridHeader(ctypes.Structure):

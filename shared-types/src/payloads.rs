@@ -280,7 +280,7 @@ impl EstimatorLearning {
 }
 
 /// Number of grids the estimator publishes per learned alpha: one of each [`GridKind`].
-pub const GRIDS_PER_ALPHA: usize = 11;
+pub const GRIDS_PER_ALPHA: usize = 17;
 
 /// Largest number of alphas one published set of gradient grids may hold: the `grids`
 /// topic keeps a whole set of this many alphas in its history and in each reader's buffer.
@@ -295,6 +295,17 @@ pub const MAX_GRID_ALPHAS: usize = 8;
 /// (`agp_affordance::AffordanceGradient::from_grids` rebuilds the gradient from them): the
 /// push weight every weighted mean of a push is taken over, the signed rotation predictions
 /// use, the means of the squares the spreads come from, and the weights of R+ and R-.
+///
+/// # Pushes that meet the object past the centroid
+/// A push's heading line passes the centroid at `r sin(alpha)` (`r` the start circle's
+/// radius), closest at one point. Most pushes meet the object's border before that point;
+/// at alpha != 0 some meet it after, across a gap (the L's inner faces, reached across its
+/// notch). Two such pushes can share an aim point and an alpha and still be different
+/// pushes, arriving tens of degrees apart, with different effects. P, the signed rotation
+/// and their statistics (kinds 1, 2, 5 to 8) hold the pushes that meet the border first
+/// (every push of a planner that starts from the start circle's nearest point: aim point
+/// before the closest approach); the `Past*` kinds (11 to 16) hold the others, in the same
+/// encoding. R+ and R- (3, 4, 9, 10) are the paper's display and hold every push.
 ///
 /// A weighted mean is written as 0 where its weight is 1e-6 or less (no push nearby); the
 /// weight times the mean gives back the weighted sum. The numbers are part of the payload
@@ -332,6 +343,24 @@ pub enum GridKind {
     RotationPosWeight = 9,
     /// Statistics: the weight of the clockwise pushes (R-'s weight).
     RotationNegWeight = 10,
+    /// Past the centroid: the weight of the pushes that meet the border after their heading
+    /// line's closest approach to the centroid (see the type's documentation).
+    PastPushWeight = 11,
+    /// Past the centroid: displacement x (m), weighted mean over
+    /// [`GridKind::PastPushWeight`].
+    PastPositionX = 12,
+    /// Past the centroid: displacement y (m), weighted mean over
+    /// [`GridKind::PastPushWeight`].
+    PastPositionY = 13,
+    /// Past the centroid: signed rotation (rad), weighted mean over
+    /// [`GridKind::PastPushWeight`].
+    PastRotation = 14,
+    /// Past the centroid: squared displacement length (m^2), weighted mean over
+    /// [`GridKind::PastPushWeight`].
+    PastDisplacementSqMean = 15,
+    /// Past the centroid: squared rotation (rad^2), weighted mean over
+    /// [`GridKind::PastPushWeight`].
+    PastRotationSqMean = 16,
 }
 
 impl GridKind {
@@ -348,6 +377,12 @@ impl GridKind {
         GridKind::RotationSqMean,
         GridKind::RotationPosWeight,
         GridKind::RotationNegWeight,
+        GridKind::PastPushWeight,
+        GridKind::PastPositionX,
+        GridKind::PastPositionY,
+        GridKind::PastRotation,
+        GridKind::PastDisplacementSqMean,
+        GridKind::PastRotationSqMean,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {

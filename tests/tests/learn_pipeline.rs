@@ -1,7 +1,7 @@
 //! The learning phase over the real pipeline: physics, `agp-estimator` and `agp-planner
 //! --mode learn` under `agp up`, a few trials on the triangle. The run ends with status 0,
-//! the estimator publishes the 33 grids of the affordance gradient (for each of alphas 0,
-//! +15, -15 the paper's S, Px, Py, R+, R- and the six statistics a planner rebuilds the
+//! the estimator publishes the 51 grids of the affordance gradient (for each of alphas 0,
+//! +15, -15 the paper's S, Px, Py, R+, R- and the twelve statistics a planner rebuilds the
 //! gradient from, every header carrying its set and its alpha's counters) on the `grids`
 //! topic and saves the AG file, which loads again (`agp-estimator --load` publishes the same
 //! grids), and the instance leaves no file.
@@ -149,7 +149,7 @@ fn collect_grids(
     seen
 }
 
-/// Checks the 33 grids of a learned triangle.
+/// Checks the 51 grids of a learned triangle.
 #[track_caller]
 fn check_grids(grids: &BTreeMap<(u32, i32), GridSeen>) {
     assert_eq!(

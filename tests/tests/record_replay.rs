@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use agp_recording::{Recording, TOPIC_COUNT, recorded_topics};
 use agp_runtime::Instance;
-use agp_shared_types::{GroundTruth, IrFrame, ServiceNames};
+use agp_shared_types::{GRIDS_PER_ALPHA, GroundTruth, IrFrame, ServiceNames};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
 
 /// Safety net only: the run takes well under a second.
@@ -154,7 +154,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
         1 + last_step + count(ServiceNames::RESETS),
         "every frame recorded"
     );
-    assert_eq!(count(ServiceNames::GRIDS), 33);
+    assert_eq!(count(ServiceNames::GRIDS), 3 * GRIDS_PER_ALPHA as u64);
     assert!(count(ServiceNames::ESTIMATES) > 0);
     for t in recorded_topics() {
         for what in ["dropped", "lost"] {

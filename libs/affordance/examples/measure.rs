@@ -55,6 +55,7 @@ fn disc_gradient() -> AffordanceGradient {
                 contact_point_obj: c,
                 displacement_obj: -c * 0.5,
                 rotation_rad: 0.3 * phi.sin() + alpha.to_radians(),
+                heading_obj: -c,
             };
             learner.add_push(alpha, &push).expect("learned alpha");
         }

@@ -2,7 +2,7 @@ use agp_shared_types::Pose2;
 use agp_shared_types::angle;
 use glam::DVec2;
 
-use crate::affordance_gradient::{ALPHA_EPS_DEG, LayerGrid};
+use crate::affordance_gradient::{ALPHA_EPS_DEG, LayerGrid, prediction_grids};
 use crate::grid::gaussian_cells;
 use crate::{AffordanceGradient, DEFAULT_CELL_SIZE_M};
 
@@ -83,12 +83,17 @@ pub struct PushOutcome {
     pub displacement_obj: DVec2,
     /// Signed rotation, radians, counter-clockwise positive.
     pub rotation_rad: f64,
+    /// The robot's heading as it met the object (object frame, any length): which of the
+    /// two pushes through the contact point at one alpha this was (see
+    /// [`meets_past_centroid`](crate::meets_past_centroid)).
+    pub heading_obj: DVec2,
 }
 
 impl PushOutcome {
-    /// The outcome of a push from the object's poses before and after it and the contact
-    /// point, all in one frame (world or odometry); the rotation is wrapped to (-pi, pi].
-    pub fn from_poses(before: Pose2, after: Pose2, contact_point: DVec2) -> Self {
+    /// The outcome of a push from the object's poses before and after it, the contact
+    /// point and the robot's heading `heading` (a direction), all in one frame (world or
+    /// odometry); the rotation is wrapped to (-pi, pi].
+    pub fn from_poses(before: Pose2, after: Pose2, contact_point: DVec2, heading: DVec2) -> Self {
         let c0 = DVec2::new(before.x, before.y);
         let to_obj = DVec2::from_angle(-before.theta);
         let rotation =
@@ -97,23 +102,16 @@ impl PushOutcome {
             contact_point_obj: to_obj.rotate(contact_point - c0),
             displacement_obj: to_obj.rotate(DVec2::new(after.x, after.y) - c0),
             rotation_rad: rotation,
+            heading_obj: to_obj.rotate(heading),
         }
     }
-}
 
-/// The grids a push adds to (every grid of a layer but S).
-const PUSH_GRIDS: [LayerGrid; 10] = [
-    LayerGrid::PushWeight,
-    LayerGrid::DisplacementX,
-    LayerGrid::DisplacementY,
-    LayerGrid::DisplacementSq,
-    LayerGrid::Rotation,
-    LayerGrid::RotationSq,
-    LayerGrid::RotationPos,
-    LayerGrid::RotationPosWeight,
-    LayerGrid::RotationNeg,
-    LayerGrid::RotationNegWeight,
-];
+    /// Whether the push met the border past the centroid
+    /// ([`meets_past_centroid`](crate::meets_past_centroid)).
+    pub fn meets_past_centroid(&self) -> bool {
+        crate::meets_past_centroid(self.contact_point_obj, self.heading_obj)
+    }
+}
 
 /// Learns an object's [`AffordanceGradient`] from trials (the paper's Algorithms 1, 2, 4).
 ///
@@ -182,11 +180,14 @@ impl AffordanceLearner {
 
     /// Algorithms 2 and 4: the effect of a push at `alpha_deg`, spread around its contact
     /// point by a unit-peak Gaussian `g` into weighted sums (`g * value`) and weights (`g`)
-    /// of the displacement, the signed rotation and, by sign, R+ or R-.
+    /// of the displacement and the signed rotation (those of the pushes that meet the border
+    /// first, or past the centroid: [`PushOutcome::meets_past_centroid`]) and, by sign, R+
+    /// or R-.
     pub fn add_push(&mut self, alpha_deg: f64, push: &PushOutcome) -> Result<(), SampleAddError> {
         if !(push.contact_point_obj.is_finite()
             && push.displacement_obj.is_finite()
-            && push.rotation_rad.is_finite())
+            && push.rotation_rad.is_finite()
+            && push.heading_obj.is_finite())
         {
             return Err(SampleAddError::NonFinite);
         }
@@ -199,13 +200,14 @@ impl AffordanceLearner {
         } else {
             (LayerGrid::RotationNeg, LayerGrid::RotationNegWeight)
         };
+        let [weight, dx, dy, dsq, r, rsq] = prediction_grids(push.meets_past_centroid());
         let values: [(LayerGrid, f32); 8] = [
-            (LayerGrid::PushWeight, 1.0),
-            (LayerGrid::DisplacementX, d.x as f32),
-            (LayerGrid::DisplacementY, d.y as f32),
-            (LayerGrid::DisplacementSq, d.length_squared() as f32),
-            (LayerGrid::Rotation, rot as f32),
-            (LayerGrid::RotationSq, (rot * rot) as f32),
+            (weight, 1.0),
+            (dx, d.x as f32),
+            (dy, d.y as f32),
+            (dsq, d.length_squared() as f32),
+            (r, rot as f32),
+            (rsq, (rot * rot) as f32),
             (signed.0, rot as f32),
             (signed.1, 1.0),
         ];
@@ -231,8 +233,9 @@ impl AffordanceLearner {
     }
 
     /// Online learning (a task's pushes, after the learning phase): the push is learned as
-    /// [`Self::add_push`] learns it, after the push statistics already at each cell it
-    /// reaches were multiplied by `forgetting^g` (`g` the push's unit-peak Gaussian at the
+    /// [`Self::add_push`] learns it, after the push statistics of its branch (before or past
+    /// the centroid) and R+ / R- already at each cell it reaches were multiplied by
+    /// `forgetting^g` (`g` the push's unit-peak Gaussian at the
     /// cell, `forgetting` in (0, 1]): at its contact point the earlier evidence then counts
     /// `forgetting` times as much, far from it as much as before. 1 (or anything outside
     /// (0, 1)) is [`Self::add_push`].
@@ -252,6 +255,20 @@ impl AffordanceLearner {
             };
             let ln = forgetting.ln() as f32;
             let grids = &mut layer.grids;
+            // The push's own branch and R+ / R-: the other branch learns nothing here.
+            let [weight, dx, dy, dsq, r, rsq] = prediction_grids(push.meets_past_centroid());
+            let forgotten = [
+                weight,
+                dx,
+                dy,
+                dsq,
+                r,
+                rsq,
+                LayerGrid::RotationPos,
+                LayerGrid::RotationPosWeight,
+                LayerGrid::RotationNeg,
+                LayerGrid::RotationNegWeight,
+            ];
             gaussian_cells(
                 cell,
                 origin,
@@ -259,7 +276,7 @@ impl AffordanceLearner {
                 self.push_sigma_m,
                 |k, g| {
                     let f = (ln * g).exp();
-                    for grid in PUSH_GRIDS {
+                    for grid in forgotten {
                         grids[grid as usize].cells_mut()[k] *= f;
                     }
                 },
@@ -291,6 +308,11 @@ impl AffordanceLearner {
                 (LayerGrid::RotationSq, r * r),
                 (LayerGrid::RotationPos, r),
                 (LayerGrid::RotationNeg, r),
+                (LayerGrid::PastDisplacementX, d),
+                (LayerGrid::PastDisplacementY, d),
+                (LayerGrid::PastDisplacementSq, d * d),
+                (LayerGrid::PastRotation, r),
+                (LayerGrid::PastRotationSq, r * r),
             ] {
                 layer.grids[grid as usize].scale(f);
             }

@@ -8,8 +8,12 @@ use crate::{AffordanceGradient, Grid};
 
 /// First bytes of every AG file.
 pub const AG_FILE_MAGIC: [u8; 6] = *b"AGPAG\0";
-/// The format version this code writes and reads.
-pub const AG_FILE_VERSION: u32 = 1;
+/// The format version this code writes. It reads this one and version 1 (11 grids per
+/// alpha, before the pushes past the centroid were kept apart: its pushes all land in the
+/// first branch's grids, as they were learned).
+pub const AG_FILE_VERSION: u32 = 2;
+/// Grids per alpha in a version-1 file.
+const V1_LAYER_GRIDS: usize = 11;
 /// Largest number of alphas a file may hold: no more than one set of published grids holds
 /// ([`MAX_GRID_ALPHAS`]), so a loaded gradient can always be published whole.
 pub const MAX_ALPHAS: u32 = 8;
@@ -177,14 +181,18 @@ impl AffordanceGradient {
     /// | alphas_deg            | `A` x f64                 | degrees, ascending                  |
     /// | name length `L`       | u32                       | 0 ..= [`MAX_NAME_LEN`]              |
     /// | object name           | `L` bytes                 | UTF-8                               |
-    /// | grids                 | `A` x 11 x side^2 x f32   | per alpha, row-major, see below     |
+    /// | grids                 | `A` x 17 x side^2 x f32   | per alpha, row-major, see below     |
     /// | per alpha             | `A` x (f64, u64, u64)     | max_rotation_rad, pushes, border points |
     /// | checksum              | u64                       | FNV-1a 64 of every byte before it   |
     ///
-    /// The 11 grids of an alpha, in order: S evidence (sum of Gaussians), push weight, then
+    /// The 17 grids of an alpha, in order: S evidence (sum of Gaussians), push weight, then
     /// weighted sums of displacement x (m), displacement y (m), squared displacement (m^2),
     /// signed rotation (rad), squared rotation (rad^2), R+ (rad), then R+ weight, R- sum
-    /// (rad, negative), R- weight. Values are as in memory (SI), so a round trip is exact.
+    /// (rad, negative), R- weight; then the same six push statistics (weight, displacement
+    /// x and y, squared displacement, rotation, squared rotation) of the pushes that meet
+    /// the border past the centroid ([`crate::meets_past_centroid`]), the push weight and
+    /// the five before R+ holding the others. Values are as in memory (SI), so a round
+    /// trip is exact. Version 1 had the first 11 alone.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), AgFileSaveError> {
         let path = path.as_ref();
         let bytes = self.to_bytes();
@@ -305,12 +313,11 @@ impl AffordanceGradient {
             return Err(r.truncated(AG_FILE_MAGIC.len()));
         }
         let version = r.u32()?;
-        if version != AG_FILE_VERSION {
-            return Err(AgFileLoadError::UnsupportedVersion {
-                path: p(),
-                found: version,
-            });
-        }
+        let layer_grids = match version {
+            AG_FILE_VERSION => LAYER_GRIDS,
+            1 => V1_LAYER_GRIDS,
+            found => return Err(AgFileLoadError::UnsupportedVersion { path: p(), found }),
+        };
         let side = r.u32()?;
         if side as usize != GRID_SIDE {
             return Err(AgFileLoadError::GridSizeMismatch {
@@ -337,7 +344,7 @@ impl AffordanceGradient {
             )));
         }
         let name_bytes = r.take(name_len as usize)?;
-        let needed = r.pos + a * (LAYER_GRIDS * GRID_BYTES + LAYER_TAIL_BYTES) + 8;
+        let needed = r.pos + a * (layer_grids * GRID_BYTES + LAYER_TAIL_BYTES) + 8;
         if bytes.len() < needed {
             return Err(r.truncated(needed));
         }
@@ -394,7 +401,7 @@ impl AffordanceGradient {
             .map(|&alpha| AlphaLayer::new(alpha, cell_size_m))
             .collect();
         for layer in &mut layers {
-            for (g, grid) in layer.grids.iter_mut().enumerate() {
+            for (g, grid) in layer.grids.iter_mut().enumerate().take(layer_grids) {
                 read_grid(&mut r, grid)?;
                 if let Some(why) = check_cells(g, grid.cells()) {
                     return Err(invalid(format!(
@@ -452,6 +459,12 @@ const GRID_NAMES: [&str; LAYER_GRIDS] = [
     "R+ weight",
     "R- sum",
     "R- weight",
+    "past push weight",
+    "past displacement x sum",
+    "past displacement y sum",
+    "past squared displacement sum",
+    "past rotation sum",
+    "past squared rotation sum",
 ];
 
 /// Why the cells of layer grid `g` are impossible, if they are: not finite, beyond
@@ -461,7 +474,10 @@ fn check_cells(g: usize, cells: &[f32]) -> Option<String> {
     let sign = match g {
         x if x == LayerGrid::DisplacementX as usize
             || x == LayerGrid::DisplacementY as usize
-            || x == LayerGrid::Rotation as usize =>
+            || x == LayerGrid::Rotation as usize
+            || x == LayerGrid::PastDisplacementX as usize
+            || x == LayerGrid::PastDisplacementY as usize
+            || x == LayerGrid::PastRotation as usize =>
         {
             0
         }

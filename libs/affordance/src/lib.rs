@@ -15,7 +15,7 @@ mod symmetry;
 
 pub use affordance_gradient::{
     AIM_BORDER_THRESHOLD, AffordanceGradient, CONTACT_BORDER_THRESHOLD, MIN_PREDICTION_EVIDENCE,
-    Prediction, UnknownAlphaError,
+    Prediction, UnknownAlphaError, meets_past_centroid,
 };
 pub use affordance_learner::{
     AffordanceLearner, LearnerBuildError, LearnerConfig, PushOutcome, SampleAddError,

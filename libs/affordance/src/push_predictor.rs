@@ -3,7 +3,7 @@ use std::borrow::Cow;
 use glam::DVec2;
 
 use crate::affordance_gradient::ALPHA_EPS_DEG;
-use crate::{AIM_BORDER_THRESHOLD, AffordanceGradient, Grid, Prediction};
+use crate::{AIM_BORDER_THRESHOLD, AffordanceGradient, Grid, Prediction, meets_past_centroid};
 
 /// Predicts pushes of the learning protocol's family from an [`AffordanceGradient`]: pushes
 /// that start on the centroid-centred circle of radius `start_radius_m` (where the learning
@@ -22,6 +22,14 @@ use crate::{AIM_BORDER_THRESHOLD, AffordanceGradient, Grid, Prediction};
 /// locates aim points), and blends the gradient's predictions there. At a learned alpha it
 /// answers exactly as [`AffordanceGradient::predict`] does; where a neighbour's line misses
 /// the learned border it falls back to that too.
+///
+/// # Before or past the centroid
+/// At alpha != 0 two starts on the circle send a push through the same aim point: one
+/// meets the border before its heading line passes closest to the centroid, the other past
+/// it ([`meets_past_centroid`]), and the gradient keeps their effects apart.
+/// [`PushPredictor::predict`] answers for the first (the nearer start, a planner's push);
+/// [`PushPredictor::predict_push`] for the push its heading names; between alphas, each
+/// neighbouring alpha's push from the same start is read from its own branch.
 #[derive(Debug, Clone)]
 pub struct PushPredictor<'a> {
     ag: &'a AffordanceGradient,
@@ -80,51 +88,103 @@ impl<'a> PushPredictor<'a> {
     }
 
     /// The effect of the push with aim point `contact_point_obj` (object frame) and deviation
-    /// `alpha_deg`; `None` as for [`AffordanceGradient::predict`]. Allocates nothing.
+    /// `alpha_deg` that starts from the start circle's nearest point (the push a planner
+    /// makes, [`approach_start`]); `None` as for [`AffordanceGradient::predict`]. Allocates
+    /// nothing.
     pub fn predict(&self, contact_point_obj: DVec2, alpha_deg: f64) -> Option<Prediction> {
-        let ag = self.ag;
         if !contact_point_obj.is_finite() || !alpha_deg.is_finite() {
             return None;
         }
+        match approach_start(contact_point_obj, alpha_deg, self.start_radius_m) {
+            Some((start, heading)) => self.predict_from(
+                contact_point_obj,
+                alpha_deg,
+                start,
+                DVec2::from_angle(heading),
+            ),
+            None => self.ag.predict(contact_point_obj, alpha_deg),
+        }
+    }
+
+    /// The effect of the push with aim point `contact_point_obj` and deviation `alpha_deg`
+    /// that heads along `heading_obj` (object frame, any length): the push that started
+    /// where its heading line enters the start circle, which meets the border before the
+    /// centroid or past it ([`meets_past_centroid`]) as its heading says. What a push
+    /// whose start is not the planner's choice (the learning benchmark's unseen pushes, a
+    /// random angle round the object) needs. `None` as for [`PushPredictor::predict`], or
+    /// when the heading is zero or the aim point is outside the start circle. Allocates
+    /// nothing.
+    pub fn predict_push(
+        &self,
+        contact_point_obj: DVec2,
+        alpha_deg: f64,
+        heading_obj: DVec2,
+    ) -> Option<Prediction> {
+        let c = contact_point_obj;
+        let u = heading_obj.try_normalize()?;
+        if !c.is_finite() || !alpha_deg.is_finite() {
+            return None;
+        }
+        // |c - t u| = radius with t > 0: where the line enters the circle behind c.
+        let cu = c.dot(u);
+        let disc = cu * cu - c.length_squared() + self.start_radius_m * self.start_radius_m;
+        if disc < 0.0 {
+            return None;
+        }
+        let t = cu + disc.sqrt();
+        if t <= 0.0 {
+            return None;
+        }
+        self.predict_from(c, alpha_deg, c - t * u, u)
+    }
+
+    /// The push from `start` (on the start circle) heading along the unit `u` through aim
+    /// point `c` at deviation `alpha_deg` (see the type's documentation).
+    fn predict_from(&self, c: DVec2, alpha_deg: f64, start: DVec2, u: DVec2) -> Option<Prediction> {
+        let ag = self.ag;
         let (first, last) = (ag.layers.first()?, ag.layers.last()?);
         if alpha_deg < first.alpha_deg - ALPHA_EPS_DEG || alpha_deg > last.alpha_deg + ALPHA_EPS_DEG
         {
             return None;
         }
-        if ag.layer_index(alpha_deg).is_some() {
-            return ag.predict(contact_point_obj, alpha_deg);
+        let past = meets_past_centroid(c, u);
+        if let Some(k) = ag.layer_index(alpha_deg) {
+            return ag.layers[k].predict(c, past);
         }
         let hi = ag.layers.iter().position(|l| l.alpha_deg > alpha_deg)?;
         let (a, b) = (&ag.layers[hi - 1], &ag.layers[hi]);
-        let Some((start, _)) = approach_start(contact_point_obj, alpha_deg, self.start_radius_m)
-        else {
-            return ag.predict(contact_point_obj, alpha_deg);
-        };
         let to_centroid = (-start).to_angle();
         let aim = |alpha: f64| {
             let dir = DVec2::from_angle(to_centroid + alpha.to_radians());
-            border_crossing(&self.shape, start, dir, AIM_BORDER_THRESHOLD)
+            border_crossing(&self.shape, start, dir, AIM_BORDER_THRESHOLD).map(|p| (p, dir))
         };
-        let (Some(ca), Some(cb)) = (aim(a.alpha_deg), aim(b.alpha_deg)) else {
-            return ag.predict(contact_point_obj, alpha_deg);
+        let (Some((ca, da)), Some((cb, db))) = (aim(a.alpha_deg), aim(b.alpha_deg)) else {
+            return ag.predict_branch(c, alpha_deg, past);
         };
         let t = (alpha_deg - a.alpha_deg) / (b.alpha_deg - a.alpha_deg);
-        AffordanceGradient::blend(a.predict(ca), b.predict(cb), t)
+        AffordanceGradient::blend(
+            a.predict(ca, meets_past_centroid(ca, da)),
+            b.predict(cb, meets_past_centroid(cb, db)),
+            t,
+        )
     }
 
-    /// [`PushPredictor::predict`], or where the gradient has too little evidence at the
+    /// [`PushPredictor::predict_push`], or where the gradient has too little evidence at the
     /// aim point (no trial's aim point within about 3 sigma), the prediction at the nearest
     /// point within `max_distance_m` that has it (searched in 1 mm rings, 16 directions
-    /// each), with confidence 0: a planner that skips unconfident predictions never picks
-    /// the push, but a user asking what it would do gets the nearest learned effect.
-    /// `None` only when nothing within `max_distance_m` has evidence. Allocates nothing.
-    pub fn predict_nearest(
+    /// each, the heading kept), with confidence 0: a planner that skips unconfident
+    /// predictions never picks the push, but a user asking what it would do gets the
+    /// nearest learned effect. `None` only when nothing within `max_distance_m` has
+    /// evidence. Allocates nothing.
+    pub fn predict_push_nearest(
         &self,
         contact_point_obj: DVec2,
         alpha_deg: f64,
+        heading_obj: DVec2,
         max_distance_m: f64,
     ) -> Option<Prediction> {
-        if let Some(p) = self.predict(contact_point_obj, alpha_deg) {
+        let predict = |c| self.predict_push(c, alpha_deg, heading_obj);
+        if let Some(p) = predict(contact_point_obj) {
             return Some(p);
         }
         let rings = (max_distance_m / NEAREST_RING_STEP_M).floor() as u32;
@@ -137,7 +197,7 @@ impl<'a> PushPredictor<'a> {
                         + DVec2::from_angle(angle) * (f64::from(r) * NEAREST_RING_STEP_M)
                 })
             })
-            .find_map(|c| self.predict(c, alpha_deg))
+            .find_map(predict)
             .map(|p| Prediction {
                 confidence: 0.0,
                 ..p
@@ -145,9 +205,9 @@ impl<'a> PushPredictor<'a> {
     }
 }
 
-/// Ring spacing of [`PushPredictor::predict_nearest`]'s search, m.
+/// Ring spacing of [`PushPredictor::predict_push_nearest`]'s search, m.
 const NEAREST_RING_STEP_M: f64 = 0.001;
-/// Directions per ring of [`PushPredictor::predict_nearest`]'s search.
+/// Directions per ring of [`PushPredictor::predict_push_nearest`]'s search.
 const NEAREST_DIRECTIONS: u32 = 16;
 
 /// The first crossing of the line from `origin` along the unit vector `dir` with the border

@@ -38,6 +38,7 @@ fn learned() -> AffordanceGradient {
                 contact_point_obj: contact(phi),
                 displacement_obj,
                 rotation_rad,
+                heading_obj: -contact(phi),
             };
             learner.add_push(alpha, &push).expect("a learned alpha");
             for s in 0..4 {
@@ -135,6 +136,7 @@ fn with_data_on_one_side_only_the_confidence_falls_with_the_alpha_distance() {
         contact_point_obj: contact(0.0),
         displacement_obj: d,
         rotation_rad: r,
+        heading_obj: -contact(0.0),
     };
     learner.add_push(0.0, &push).expect("learned alpha");
     let ag = learner.into_gradient();
@@ -254,12 +256,16 @@ fn a_push_outcome_from_poses_applied_to_the_start_pose_gives_the_end_pose() {
     let before = Pose2::new(0.3, -0.2, 2.5);
     let after = Pose2::new(0.31, -0.185, 2.5 + 0.4 - TAU);
     let contact_world = DVec2::new(0.27, -0.21);
-    let push = PushOutcome::from_poses(before, after, contact_world);
+    // The robot heads at the centroid.
+    let heading_world = DVec2::new(before.x, before.y) - contact_world;
+    let push = PushOutcome::from_poses(before, after, contact_world, heading_world);
     assert!((push.rotation_rad - 0.4).abs() < 1e-12);
-    // Back to the world: the contact point and the end pose.
+    // Back to the world: the contact point, the heading and the end pose.
     let to_world = DVec2::from_angle(before.theta);
     let c = DVec2::new(before.x, before.y) + to_world.rotate(push.contact_point_obj);
     assert!(c.distance(contact_world) < 1e-12);
+    assert!(to_world.rotate(push.heading_obj).distance(heading_world) < 1e-12);
+    assert!(!push.meets_past_centroid());
     let mut learner = AffordanceLearner::new("box", &LearnerConfig::default()).expect("valid");
     learner.add_push(0.0, &push).expect("learned alpha");
     let p = learner
@@ -286,6 +292,7 @@ fn the_learner_refuses_unknown_alphas_non_finite_samples_and_bad_configs() {
         contact_point_obj: DVec2::ZERO,
         displacement_obj: DVec2::ZERO,
         rotation_rad: f64::NAN,
+        heading_obj: DVec2::X,
     };
     assert_eq!(learner.add_push(0.0, &push), Err(SampleAddError::NonFinite));
     let config = |alphas: Vec<f64>, sigma: f64| LearnerConfig {

@@ -19,6 +19,7 @@ fn gradient() -> AffordanceGradient {
                 contact_point_obj: c,
                 displacement_obj: -c * 0.5,
                 rotation_rad: 0.3 * (3.0 * phi).sin() + alpha.to_radians(),
+                heading_obj: -c,
             };
             learner.add_push(alpha, &push).expect("learned alpha");
             learner.add_border_point(alpha, c).expect("learned alpha");
@@ -107,7 +108,7 @@ fn the_file_starts_with_the_documented_header() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (_, bytes) = saved(dir.path());
     assert_eq!(&bytes[..6], b"AGPAG\0");
-    assert_eq!(u32::from_le_bytes(bytes[6..10].try_into().unwrap()), 1);
+    assert_eq!(u32::from_le_bytes(bytes[6..10].try_into().unwrap()), 2);
     assert_eq!(
         u32::from_le_bytes(bytes[10..14].try_into().unwrap()),
         GRID_SIDE as u32
@@ -144,12 +145,52 @@ fn another_format_version_is_refused() {
     let (_, mut bytes) = saved(dir.path());
     bytes[6..10].copy_from_slice(&(AG_FILE_VERSION + 1).to_le_bytes());
     reseal(&mut bytes);
-    let (path, err) = load_bytes(dir.path(), "v2.ag", &bytes);
+    let (path, err) = load_bytes(dir.path(), "v3.ag", &bytes);
     assert!(
-        matches!(err, AgFileLoadError::UnsupportedVersion { found: 2, .. }),
+        matches!(err, AgFileLoadError::UnsupportedVersion { found: 3, .. }),
         "{err}"
     );
     assert_names_path(&err, &path);
+}
+
+/// The bytes of a version-1 file of the same gradient: 11 grids per alpha (the last six,
+/// the pushes past the centroid, are left out; this gradient has none).
+fn as_version_1(bytes: &[u8]) -> Vec<u8> {
+    const GRID_BYTES: usize = GRID_SIDE * GRID_SIDE * 4;
+    let alphas = u32::from_le_bytes(bytes[22..26].try_into().unwrap()) as usize;
+    let name_at = 26 + 8 * alphas;
+    let name_len = u32::from_le_bytes(bytes[name_at..name_at + 4].try_into().unwrap()) as usize;
+    let grids_at = name_at + 4 + name_len;
+    let mut out = bytes[..grids_at].to_vec();
+    out[6..10].copy_from_slice(&1u32.to_le_bytes());
+    for a in 0..alphas {
+        let layer = grids_at + a * 17 * GRID_BYTES;
+        out.extend_from_slice(&bytes[layer..layer + 11 * GRID_BYTES]);
+    }
+    out.extend_from_slice(&bytes[grids_at + alphas * 17 * GRID_BYTES..]);
+    reseal(&mut out);
+    out
+}
+
+#[test]
+fn a_version_1_file_still_loads_and_predicts_as_before() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (_, bytes) = saved(dir.path());
+    let v1 = as_version_1(&bytes);
+    assert_eq!(v1.len(), bytes.len() - 3 * 6 * GRID_SIDE * GRID_SIDE * 4);
+    let path = dir.path().join("v1.ag");
+    std::fs::write(&path, &v1).expect("writable temp dir");
+    let loaded = AffordanceGradient::load(&path).expect("a version-1 file loads");
+    let original = gradient();
+    for alpha in [0.0, 15.0, -15.0] {
+        let c = DVec2::new(0.0, 0.03);
+        let p = loaded.predict(c, alpha).expect("learned there");
+        assert_eq!(Some(p), original.predict(c, alpha));
+    }
+    // Saved again, it is a version-2 file of the same gradient.
+    loaded.save(dir.path().join("v2.ag")).expect("writable");
+    let again = std::fs::read(dir.path().join("v2.ag")).expect("written");
+    assert_eq!(again, bytes);
 }
 
 #[test]

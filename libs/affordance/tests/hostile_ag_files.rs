@@ -26,6 +26,7 @@ fn gradient() -> AffordanceGradient {
                 contact_point_obj: c,
                 displacement_obj: -c * 0.5,
                 rotation_rad: 0.3 * (3.0 * phi).sin(),
+                heading_obj: -c,
             };
             learner.add_push(alpha, &push).expect("learned alpha");
             learner.add_border_point(alpha, c).expect("learned alpha");
@@ -54,7 +55,7 @@ const NAME_LEN_AT: usize = ALPHAS_AT + 8 * ALPHAS;
 const NAME_AT: usize = NAME_LEN_AT + 4;
 const GRIDS_AT: usize = NAME_AT + "triangle".len();
 const GRID_BYTES: usize = GRID_CELLS * 4;
-const TAILS_AT: usize = GRIDS_AT + ALPHAS * 11 * GRID_BYTES;
+const TAILS_AT: usize = GRIDS_AT + ALPHAS * 17 * GRID_BYTES;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
@@ -212,6 +213,12 @@ fn an_ag_file_with_an_absurd_cell_size_count_or_statistic_is_refused_naming_the_
             "r-minus-positive",
             Box::new(f32_at(GRIDS_AT + 9 * GRID_BYTES, 0.5)),
             &["R- sum", "non-positive"],
+        ),
+        // The past-centroid push weight, grid 12.
+        (
+            "past-weight-negative",
+            Box::new(f32_at(GRIDS_AT + 11 * GRID_BYTES, -3.0)),
+            &["past push weight", "non-negative"],
         ),
         (
             "rotation-1e300",

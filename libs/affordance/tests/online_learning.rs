@@ -10,6 +10,7 @@ fn push(contact: DVec2, d: DVec2, rot: f64) -> PushOutcome {
         contact_point_obj: contact,
         displacement_obj: d,
         rotation_rad: rot,
+        heading_obj: -contact,
     }
 }
 

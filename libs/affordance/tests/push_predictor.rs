@@ -5,8 +5,8 @@ use agp_shared_types::angle;
 use std::f64::consts::{PI, TAU};
 
 use agp_affordance::{
-    AffordanceGradient, AffordanceLearner, LearnerConfig, PushOutcome, PushPredictor,
-    approach_start,
+    AffordanceGradient, AffordanceLearner, Grid, LearnerConfig, PushOutcome, PushPredictor,
+    approach_start, meets_past_centroid,
 };
 use glam::DVec2;
 
@@ -44,6 +44,7 @@ fn learned() -> AffordanceGradient {
                 contact_point_obj: aim(phi, alpha).expect("every start meets the disc"),
                 displacement_obj,
                 rotation_rad,
+                heading_obj: DVec2::from_angle(phi + PI + alpha.to_radians()),
             };
             learner.add_push(alpha, &push).expect("a learned alpha");
             learner
@@ -147,4 +148,70 @@ fn an_alpha_push_starts_where_its_line_meets_the_contact_at_that_alpha() {
 #[test]
 fn a_contact_outside_the_start_circle_has_no_start() {
     assert!(approach_start(DVec2::new(0.2, 0.0), 0.0, 0.1).is_none());
+}
+
+/// The two pushes at alpha `alpha_deg` whose heading lines pass through `c` from the start
+/// circle of radius `START`: (start, unit heading) of the one that meets `c` before its
+/// line passes closest to the centroid, then of the one that meets it past.
+fn both_pushes_through(c: DVec2, alpha_deg: f64) -> [(DVec2, DVec2); 2] {
+    let q = START * alpha_deg.to_radians().sin() / c.length();
+    let gamma = c.to_angle();
+    let mut pushes = [gamma - q.asin(), gamma - PI + q.asin()].map(|h| {
+        let u = DVec2::from_angle(h);
+        let cu = c.dot(u);
+        let t = cu + (cu * cu - c.length_squared() + START * START).sqrt();
+        (c - t * u, u)
+    });
+    pushes.sort_by(|a, b| c.dot(a.1).total_cmp(&c.dot(b.1)));
+    pushes
+}
+
+#[test]
+fn two_pushes_through_one_aim_point_at_one_alpha_are_told_apart_by_their_heading() {
+    let c = DVec2::new(0.0, 0.04);
+    let alpha = 15.0;
+    let [near, past] = both_pushes_through(c, alpha);
+    // Both are pushes of the protocol: from the start circle, heading at the centroid
+    // turned by +15 deg, through c; one meets c before the closest approach, one past it.
+    for (s, u) in [near, past] {
+        assert!((s.length() - START).abs() < 1e-9);
+        let alpha_of = (-s).angle_to(u).to_degrees();
+        assert!((alpha_of - alpha).abs() < 1e-6, "alpha {alpha_of}");
+        assert!((s + u * (c - s).length() - c).length() < 1e-9);
+    }
+    assert!(!meets_past_centroid(c, near.1) && meets_past_centroid(c, past.1));
+    // 60 deg apart: two different pushes.
+    assert!(near.1.angle_to(past.1).abs().to_degrees() > 50.0);
+
+    // One learned push of each, with different effects.
+    let mut learner = AffordanceLearner::new("l", &LearnerConfig::default()).expect("valid");
+    let effects = [
+        (DVec2::new(0.01, -0.03), -0.5),
+        (DVec2::new(-0.02, 0.0), 0.3),
+    ];
+    for ((_, u), (d, r)) in [near, past].into_iter().zip(effects) {
+        let push = PushOutcome {
+            contact_point_obj: c,
+            displacement_obj: d,
+            rotation_rad: r,
+            heading_obj: u,
+        };
+        learner.add_push(alpha, &push).expect("a learned alpha");
+    }
+    let ag = learner.into_gradient();
+    let shape = Grid::centred(ag.cell_size_m());
+    let predictor = PushPredictor::with_shape(&ag, shape, START);
+    // Each heading gets its own push's effect, not their mean.
+    for ((_, u), (d, r)) in [near, past].into_iter().zip(effects) {
+        let p = predictor.predict_push(c, alpha, u).expect("learned there");
+        assert!((p.displacement - d).length() < 1e-6, "{p:?}");
+        assert!((p.rotation_rad - r).abs() < 1e-6);
+        assert!(p.rotation_spread_rad < 1e-3);
+    }
+    // A planner's push (from the nearer start) is the one that meets c first.
+    let p = predictor.predict(c, alpha).expect("learned there");
+    assert!((p.rotation_rad - effects[0].1).abs() < 1e-6);
+    let (start, heading) = approach_start(c, alpha, START).expect("reachable");
+    assert!(start.distance(near.0) < 1e-9);
+    assert!(DVec2::from_angle(heading).distance(near.1) < 1e-9);
 }

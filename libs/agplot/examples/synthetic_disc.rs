@@ -29,6 +29,7 @@ fn main() -> anyhow::Result<()> {
                 displacement_obj: DVec2::from_angle(phi + PI + 0.5 * a)
                     * (0.02 + 0.004 * phi.cos()),
                 rotation_rad: 0.3 * phi.sin() + 0.8 * a,
+                heading_obj: -DVec2::from_angle(phi),
             };
             learner.add_push(alpha, &push)?;
             for s in 0..4 {

@@ -26,7 +26,7 @@
 
 use agp_affordance::{
     AffordanceGradient, AffordanceLearner, Grid, LearnerBuildError, LearnerConfig, Prediction,
-    PushOutcome, PushPredictor,
+    PushOutcome, PushPredictor, approach_start,
 };
 use agp_shared_types::{Pose2, angle};
 use glam::DVec2;
@@ -180,7 +180,8 @@ impl OnlineLearner {
         }
         let predicted = PushPredictor::borrowing(self.learner.gradient(), shape, start_radius_m)
             .predict(push.contact_obj, push.alpha_deg)?;
-        let raw = PushOutcome::from_poses(push.before, after, push.contact_obj);
+        // The contact is already in the object frame: `raw` gives the motion alone.
+        let raw = PushOutcome::from_poses(push.before, after, push.contact_obj, DVec2::X);
         let displacement = raw.displacement_obj / push.scale;
         // Out of any push's reach: a bad match, not a push.
         if !displacement.is_finite() || displacement.length() > 0.2 {
@@ -196,10 +197,14 @@ impl OnlineLearner {
         } else {
             raw.rotation_rad / push.scale
         };
+        // The planner's push: from the start circle's nearest point, as predicted.
+        let heading_obj = approach_start(push.contact_obj, push.alpha_deg, start_radius_m)
+            .map_or(-push.contact_obj, |(_, h)| DVec2::from_angle(h));
         let observed = PushOutcome {
             contact_point_obj: push.contact_obj,
             displacement_obj: displacement,
             rotation_rad,
+            heading_obj,
         };
         let ratio = |o: f64, p: f64| (o / p).clamp(1.0 / 3.0, 3.0).powf(c.gain_step);
         let p = predicted.displacement;

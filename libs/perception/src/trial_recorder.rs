@@ -450,6 +450,7 @@ impl TrialRecorder {
             contact_point_obj: contact_obj,
             displacement_obj: to_obj.rotate(after.position() - before.position()),
             rotation_rad: wrap_angle(after.theta - before.theta),
+            heading_obj: DVec2::from_angle(contact.robot_obj.theta),
         };
         Ok(TrialRecord {
             alpha_deg: self.alpha_deg,

@@ -492,6 +492,7 @@ mod tests {
                     contact_point_obj: c,
                     displacement_obj: 0.03 * DVec2::from_angle(heading),
                     rotation_rad: 0.0,
+                    heading_obj: DVec2::from_angle(heading),
                 };
                 learner.add_push(alpha, &push).expect("push");
             }

@@ -97,7 +97,7 @@ fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Affordance
             };
             sim.reset(home, Pose::new(s.x, s.y, heading));
             if push(&mut sim, PUSH_S, 2.0 * r / SPEED) {
-                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u);
+                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u, u);
                 learner.add_push(alpha, &outcome).expect("push");
             }
         }

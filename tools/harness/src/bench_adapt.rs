@@ -235,7 +235,8 @@ impl World for JudgedWorld {
             Some(LearnEventKind::TaskPushEnd) => {
                 if let Some((aim, alpha, scale, before, estimated_theta)) = self.push.take() {
                     let after = self.inner.sim().object_pose();
-                    let truth = PushOutcome::from_poses(before, after, before.position());
+                    // The motion alone is scored: contact and heading are placeholders.
+                    let truth = PushOutcome::from_poses(before, after, before.position(), DVec2::X);
                     // Both in the world frame: the prediction is in the frame of the pose
                     // the estimator held (its orientation is known modulo the symmetry),
                     // the truth in the object's true frame.

@@ -336,10 +336,11 @@ const LEARN_MEAN_FIGURES: [[&str; 2]; 5] = [
 ];
 
 /// Counts of an object, summed over the seeds.
-const LEARN_SUMMED: [&[&str]; 6] = [
+const LEARN_SUMMED: [&[&str]; 7] = [
     &["prediction", "pushes"],
     &["prediction", "unpredicted"],
     &["prediction", "from_nearest"],
+    &["prediction", "keyed_by_touch"],
     &["pose", "circlings"],
     &["trials"],
     &["trials_learned"],
@@ -740,8 +741,8 @@ fn table(job: &Job, r: &ObjectReport, wall_s: f64) -> String {
     }
     let p = &r.prediction;
     line(format!(
-        "prediction of {} unseen pushes (random contact, alpha in [-15, +15] deg), {} without a prediction, {} from the nearest learned point:",
-        p.pushes, p.unpredicted, p.from_nearest
+        "prediction of {} unseen pushes (random contact, alpha in [-15, +15] deg), {} without a prediction, {} from the nearest learned point, {} keyed by the touch point (the heading line met no border):",
+        p.pushes, p.unpredicted, p.from_nearest, p.keyed_by_touch
     ));
     line(format!(
         "  median displacement error  {} mm ({} of the true displacement)",
@@ -842,6 +843,7 @@ fn object_json(
             "pushes": p.pushes,
             "unpredicted": p.unpredicted,
             "from_nearest": p.from_nearest,
+            "keyed_by_touch": p.keyed_by_touch,
         },
         "pose": {
             "median_position_error_mm": finite(r.pose_position_mm.median),

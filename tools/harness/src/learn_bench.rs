@@ -293,6 +293,8 @@ struct PushTruth {
     touch_obj: Option<DVec2>,
     /// Where the robot's heading line met the object at that moment.
     aim_obj: Option<DVec2>,
+    /// The robot's heading at that moment (unit).
+    heading_obj: Option<DVec2>,
     /// Displacement of the centroid.
     displacement_obj: DVec2,
     /// Rotation, rad.
@@ -345,13 +347,16 @@ impl Spread {
 pub struct PredictionStats {
     /// Pushes evaluated (contact made).
     pub pushes: usize,
-    /// Pushes the gradient had no prediction for: no contact point to key it by (for the
-    /// heading line: it met no learned border), or no evidence within
-    /// [`NEAREST_EVIDENCE_M`] of it.
+    /// Pushes the gradient had no prediction for: no contact point to key it by, or no
+    /// evidence within [`NEAREST_EVIDENCE_M`] of it.
     pub unpredicted: usize,
     /// Pushes predicted from the nearest point with evidence, the aim point having too
-    /// little ([`PushPredictor::predict_nearest`]); counted in the errors.
+    /// little ([`PushPredictor::predict_push_nearest`]); counted in the errors.
     pub from_nearest: usize,
+    /// Pushes whose heading line met no learned border (the robot's disc grazed the
+    /// object beside it), keyed instead by where the body sweep says the disc touched
+    /// first; predicted from the nearest evidence like the others, counted in the errors.
+    pub keyed_by_touch: usize,
     /// |predicted - true displacement|, mm.
     pub displacement_error_mm: Spread,
     /// The same as a fraction of the true displacement.
@@ -615,6 +620,7 @@ struct BenchWorld {
     watch_touch: bool,
     touch_obj: Option<DVec2>,
     aim_obj: Option<DVec2>,
+    heading_obj: Option<DVec2>,
     /// The trial under way's alpha.
     trial_alpha: f64,
     trials: Vec<TrialOutcome>,
@@ -637,6 +643,7 @@ impl BenchWorld {
         self.watch_touch = true;
         self.touch_obj = None;
         self.aim_obj = None;
+        self.heading_obj = None;
     }
 
     /// The bench's error for a problem of the learner that must not pass quietly.
@@ -687,6 +694,7 @@ impl LearnWorld for BenchWorld {
             self.touch_obj = Some(nearest_border_point(&self.shape, c));
             let d = DVec2::from_angle(rp.theta - o.theta);
             self.aim_obj = ray_hit(&self.shape, c, d);
+            self.heading_obj = Some(d);
         }
         self.learner.observe(&view(&self.sim));
         self.perceive();
@@ -742,6 +750,7 @@ impl LearnWorld for BenchWorld {
                 truth: PushTruth {
                     touch_obj: self.touch_obj,
                     aim_obj: self.aim_obj,
+                    heading_obj: self.heading_obj,
                     displacement_obj: self.object0.to_local(after.position()),
                     rotation_rad: wrap_angle(after.theta - self.object0.theta),
                     after,
@@ -886,6 +895,7 @@ pub fn run_object(
         watch_touch: false,
         touch_obj: None,
         aim_obj: None,
+        heading_obj: None,
         trial_alpha: f64::NAN,
         trials: Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha),
         no_contact: 0,
@@ -1043,11 +1053,12 @@ pub fn run_object(
     let truth_learned = {
         let mut learner = new_learner()?;
         for t in &trials {
-            if let Some(c) = t.truth.aim_obj {
+            if let (Some(c), Some(heading_obj)) = (t.truth.aim_obj, t.truth.heading_obj) {
                 let outcome = PushOutcome {
                     contact_point_obj: c,
                     displacement_obj: t.truth.displacement_obj,
                     rotation_rad: t.truth.rotation_rad,
+                    heading_obj,
                 };
                 add(&mut learner, t.alpha_deg, &outcome);
             }
@@ -1089,7 +1100,7 @@ pub fn run_object(
         let Some(contact) = estimates else { continue };
         samples.push(EvalPush {
             contact,
-            true_aim: world.aim_obj,
+            true_aim: world.aim_obj.zip(world.heading_obj),
             alpha_deg: alpha,
             displacement_obj: object0.to_local(after.position()),
             rotation_rad: wrap_angle(after.theta - object0.theta),
@@ -1098,7 +1109,22 @@ pub fn run_object(
     }
     let eval_sim_time_s = world.sim.sim_time() - t_eval;
     let eval_wall_s = wall.elapsed().as_secs_f64();
-    let keyed = |m: ContactMethod| move |e: &EvalPush| e.contact.get(m);
+    // The estimator's contact and the robot's heading as it estimated it; a heading line
+    // that met no learned border (the disc grazed the object beside it) gives way to the
+    // body sweep's touch point.
+    let keyed = |m: ContactMethod| {
+        move |e: &EvalPush| {
+            let heading = DVec2::from_angle(e.contact.robot_obj.theta);
+            match (e.contact.get(m), m) {
+                (Some(c), _) => Some(PushKey::at(c, heading)),
+                (None, ContactMethod::HeadingLine) => e.contact.body_sweep.map(|c| PushKey {
+                    by_touch: true,
+                    ..PushKey::at(c, heading)
+                }),
+                (None, _) => None,
+            }
+        }
+    };
     let predictor = PushPredictor::new(&gradient, radius);
     let prediction = predict_all(&predictor, &samples, order, keyed(cfg.contact_method));
     let prediction_by_method = by_method
@@ -1112,16 +1138,14 @@ pub fn run_object(
         &PushPredictor::with_shape(&truth_learned, predictor.shape().clone(), radius),
         &samples,
         order,
-        |e| e.true_aim,
+        |e| e.true_aim.map(|(c, heading)| PushKey::at(c, heading)),
     );
     // Rotation error by how far the push's alpha lies from the nearest learned alpha.
     let mut bins: [Vec<f64>; 3] = Default::default();
     if order != 0 {
         for e in &samples {
-            let Some(p) = e
-                .contact
-                .get(cfg.contact_method)
-                .and_then(|c| predictor.predict(c, e.alpha_deg))
+            let Some(p) = keyed(cfg.contact_method)(e)
+                .and_then(|k| predictor.predict_push(k.point, e.alpha_deg, k.heading))
             else {
                 continue;
             };
@@ -1179,8 +1203,8 @@ pub fn run_object(
 struct EvalPush {
     /// The estimator's contact estimates (object frame).
     contact: ContactEstimates,
-    /// The true aim point (object frame).
-    true_aim: Option<DVec2>,
+    /// The true aim point and heading (object frame).
+    true_aim: Option<(DVec2, DVec2)>,
     alpha_deg: f64,
     /// True effect, object frame.
     displacement_obj: DVec2,
@@ -1192,23 +1216,49 @@ struct EvalPush {
 /// the object come about 5 mm apart).
 pub const NEAREST_EVIDENCE_M: f64 = 0.01;
 
-/// How `g` predicts `samples`, queried at the contact point `key` gives.
+/// What an unseen push is predicted by.
+#[derive(Debug, Clone, Copy)]
+struct PushKey {
+    /// Aim point (or touch point), object frame.
+    point: DVec2,
+    /// The robot's heading, object frame.
+    heading: DVec2,
+    /// Keyed by the touch point: the heading line met no learned border.
+    by_touch: bool,
+}
+
+impl PushKey {
+    fn at(point: DVec2, heading: DVec2) -> Self {
+        Self {
+            point,
+            heading,
+            by_touch: false,
+        }
+    }
+}
+
+/// How `g` predicts `samples`, queried as `key` says.
 fn predict_all(
     g: &PushPredictor<'_>,
     samples: &[EvalPush],
     order: u32,
-    key: impl Fn(&EvalPush) -> Option<DVec2>,
+    key: impl Fn(&EvalPush) -> Option<PushKey>,
 ) -> PredictionStats {
     let mut stats = PredictionStats::default();
     let (mut de, mut dr, mut re, mut td, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for e in samples {
         stats.pushes += 1;
-        let Some(p) = key(e).and_then(|c| g.predict_nearest(c, e.alpha_deg, NEAREST_EVIDENCE_M))
-        else {
+        let Some((p, k)) = key(e).and_then(|k| {
+            g.predict_push_nearest(k.point, e.alpha_deg, k.heading, NEAREST_EVIDENCE_M)
+                .map(|p| (p, k))
+        }) else {
             stats.unpredicted += 1;
             continue;
         };
+        if k.by_touch {
+            stats.keyed_by_touch += 1;
+        }
         if p.confidence == 0.0 {
             stats.from_nearest += 1;
         }
@@ -1290,8 +1340,8 @@ pub fn format_report(r: &ObjectReport) -> String {
     }
     let p = &r.prediction;
     line(format!(
-        "(ii) {} unseen pushes (random angle, alpha in [-15, 15]), {} without a prediction:",
-        p.pushes, p.unpredicted
+        "(ii) {} unseen pushes (random angle, alpha in [-15, 15]), {} without a prediction, {} from the nearest evidence, {} keyed by the touch point:",
+        p.pushes, p.unpredicted, p.from_nearest, p.keyed_by_touch
     ));
     line(format!(
         "    displacement error  {}",

@@ -436,7 +436,7 @@ pub fn learn_from_sim(scenario: &Scenario, starts_per_alpha: usize) -> Result<Af
                 sim.step(0.0, 0.0);
             }
             let o = sim.object_pose();
-            let outcome = PushOutcome::from_poses(home, o, s + t * u);
+            let outcome = PushOutcome::from_poses(home, o, s + t * u, u);
             learner
                 .add_push(alpha, &outcome)
                 .context("cannot learn a push")?;

@@ -36,6 +36,7 @@ pub fn learned_disc_of_radius(trials: usize, radius_m: f64) -> AffordanceGradien
                 contact_point_obj: DVec2::from_angle(phi) * radius_m,
                 displacement_obj,
                 rotation_rad,
+                heading_obj: -DVec2::from_angle(phi),
             };
             learner.add_push(alpha, &push).expect("a learned alpha");
             for s in 0..4 {

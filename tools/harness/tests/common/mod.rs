@@ -85,7 +85,7 @@ pub fn learn_from_truth(scenario: &Scenario, robot: &RobotDescription) -> Afford
                 sim.step(0.0, 0.0);
             }
             if touched {
-                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u);
+                let outcome = PushOutcome::from_poses(home, sim.object_pose(), s + t * u, u);
                 learner.add_push(alpha, &outcome).expect("push");
             }
         }
