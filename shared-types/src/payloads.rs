@@ -297,15 +297,15 @@ pub const MAX_GRID_ALPHAS: usize = 8;
 /// use, the means of the squares the spreads come from, and the weights of R+ and R-.
 ///
 /// # Pushes that meet the object past the centroid
-/// A push's heading line passes the centroid at `r sin(alpha)` (`r` the start circle's
-/// radius), closest at one point. Most pushes meet the object's border before that point;
-/// at alpha != 0 some meet it after, across a gap (the L's inner faces, reached across its
-/// notch). Two such pushes can share an aim point and an alpha and still be different
-/// pushes, arriving tens of degrees apart, with different effects. P, the signed rotation
-/// and their statistics (kinds 1, 2, 5 to 8) hold the pushes that meet the border first
-/// (every push of a planner that starts from the start circle's nearest point: aim point
-/// before the closest approach); the `Past*` kinds (11 to 16) hold the others, in the same
-/// encoding. R+ and R- (3, 4, 9, 10) are the paper's display and hold every push.
+/// A push's heading line passes the centroid at `r sin(alpha)` (`r` the start circle's radius),
+/// closest at one point. Most pushes meet the object's border before that point; at alpha != 0 some
+/// meet it after (the L's long face, nearer its centroid than such a line passes, is met on both
+/// sides of the closest approach). Two such pushes can share an aim point and an alpha and still be
+/// different pushes, arriving tens of degrees apart, with different effects. P, the signed rotation
+/// and their statistics (kinds 1, 2, 5 to 8) hold the pushes that meet the border first (every push
+/// of a planner that starts from the start circle's nearest point: aim point before the closest
+/// approach); the `Past*` kinds (11 to 16) hold the others, in the same encoding. R+ and R- (3, 4,
+/// 9, 10) are the paper's display and hold every push.
 ///
 /// A weighted mean is written as 0 where its weight is 1e-6 or less (no push nearby); the
 /// weight times the mean gives back the weighted sum. The numbers are part of the payload
