@@ -112,7 +112,7 @@ pub(crate) const fn prediction_grids(past: bool) -> [LayerGrid; 6] {
 /// aim point and an alpha and still arrive tens of degrees apart (the two tangents from the
 /// aim point to the circle of radius `r sin(alpha)` round the centroid, `r` the start
 /// circle's radius): the gradient keeps their effects apart. On the L, whose long face lies
-/// nearer the centroid (22.5 mm) than such a line passes it (26 mm at 15 deg), about a
+/// nearer the centroid (22.5 mm) than such a line passes it (30 mm at 15 deg), about a
 /// fifth of the learning benchmark's unseen pushes meet the border past the centroid;
 /// keyed together with the others, the L's median rotation error of unseen pushes was
 /// 4.43 deg (mean over seeds 1-10), apart 3.27.

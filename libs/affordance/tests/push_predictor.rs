@@ -180,7 +180,7 @@ fn two_pushes_through_one_aim_point_at_one_alpha_are_told_apart_by_their_heading
         assert!((s + u * (c - s).length() - c).length() < 1e-9);
     }
     assert!(!meets_past_centroid(c, near.1) && meets_past_centroid(c, past.1));
-    // 60 deg apart: two different pushes.
+    // 2 acos(25.9 mm / 40 mm) = 99 deg apart: two different pushes.
     assert!(near.1.angle_to(past.1).abs().to_degrees() > 50.0);
 
     // One learned push of each, with different effects.
