@@ -300,21 +300,15 @@ impl AffordanceLearner {
         }
         let (d, r) = (displacement_gain as f32, rotation_gain as f32);
         for layer in &mut self.gradient.layers {
-            for (grid, f) in [
-                (LayerGrid::DisplacementX, d),
-                (LayerGrid::DisplacementY, d),
-                (LayerGrid::DisplacementSq, d * d),
-                (LayerGrid::Rotation, r),
-                (LayerGrid::RotationSq, r * r),
-                (LayerGrid::RotationPos, r),
-                (LayerGrid::RotationNeg, r),
-                (LayerGrid::PastDisplacementX, d),
-                (LayerGrid::PastDisplacementY, d),
-                (LayerGrid::PastDisplacementSq, d * d),
-                (LayerGrid::PastRotation, r),
-                (LayerGrid::PastRotationSq, r * r),
-            ] {
-                layer.grids[grid as usize].scale(f);
+            // Each branch's sums (its weight untouched), then R+ and R-.
+            for past in [false, true] {
+                let [_, dx, dy, dsq, rot, rsq] = prediction_grids(past);
+                for (grid, f) in [(dx, d), (dy, d), (dsq, d * d), (rot, r), (rsq, r * r)] {
+                    layer.grids[grid as usize].scale(f);
+                }
+            }
+            for grid in [LayerGrid::RotationPos, LayerGrid::RotationNeg] {
+                layer.grids[grid as usize].scale(r);
             }
             layer.max_rotation_rad *= rotation_gain;
         }
