@@ -136,7 +136,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
 
     // The counts: physics published one frame at the start, one per applied command and
     // one per reset; the planner one command per step and two resets; the estimator a
-    // whole set of 3 x 11 grids. The recorder dropped nothing and lost nothing.
+    // whole set of 3 alphas x `GRIDS_PER_ALPHA` grids. The recorder dropped nothing and lost nothing.
     let count = |topic: &str| rec.channel(topic).map_or(0, |c| c.messages);
     let frames: Vec<IrFrame> = rec
         .topic_messages(ServiceNames::IR_FRAMES)
