@@ -85,6 +85,8 @@ class ObjectEstimate(ctypes.Structure):
         ("border_seen", ctypes.c_double),
         ("grids_seq", ctypes.c_uint64),
         ("estimator_start_ns", ctypes.c_uint64),
+        ("event_session", ctypes.c_uint64),
+        ("event_seq", ctypes.c_uint64),
         ("valid", ctypes.c_uint8),
         ("contact", ctypes.c_uint8),
         ("learning", ctypes.c_uint8),
@@ -96,7 +98,7 @@ class ObjectEstimate(ctypes.Structure):
 
     @staticmethod
     def type_name() -> str:
-        return "agp::ObjectEstimate.v3"
+        return "agp::ObjectEstimate.v4"
 
 
 class LearnEvent(ctypes.Structure):
@@ -220,7 +222,7 @@ assert ctypes.sizeof(Pose2) == 24
 assert ctypes.sizeof(TimingHeader) == 72
 assert ctypes.sizeof(IrFrame) == 72 * 2 + 8 * 6 + 32 + 24 * 2 == 272
 assert ctypes.sizeof(MotorCommand) == 72 + 40 == 112
-assert ctypes.sizeof(ObjectEstimate) == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 8 + 8 == 256
+assert ctypes.sizeof(ObjectEstimate) == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 16 + 8 + 8 == 272
 assert ctypes.sizeof(GridHeader) == 8 + 4 * 4 + 8 * 8 == 88
 assert ctypes.sizeof(GradientGrid) == 88 + 4 * GRID_CELLS
 assert ctypes.sizeof(LearnEvent) == 8 * 2 + 4 * 4 + 8 * 3 + 24 + 8 + 32 + 24 + 16 + 8 == 168

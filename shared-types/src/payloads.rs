@@ -188,7 +188,7 @@ pub struct GroundTruth {
 /// encloses, moved by the robot's own travel while it pushes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("agp::ObjectEstimate.v3")]
+#[type_name("agp::ObjectEstimate.v4")]
 pub struct ObjectEstimate {
     pub timing: TimingHeader,
     /// The step of the IR frame this estimate derives from.
@@ -228,6 +228,14 @@ pub struct ObjectEstimate {
     /// When the estimator that sent it started (CLOCK_MONOTONIC, ns): a larger value than
     /// the one a reader knows means the estimator restarted (and lost what it learned).
     pub estimator_start_ns: u64,
+    /// The newest planner event the estimator took in before it made this estimate: its
+    /// [`LearnEvent::session`] and [`LearnEvent::seq`] (0 and 0: none yet). A planner that
+    /// sees its own session here and a seq at or past the one it last sent knows the
+    /// estimate shows that event's effect (a circling matched, a push carried on), whatever
+    /// the clocks: across a bridge an event reaches the estimator a link's latency after it
+    /// left, and physics on the realtime clock does not wait for it.
+    pub event_session: u64,
+    pub event_seq: u64,
     /// 1 if `pose` is valid (the object was matched since the estimator started).
     pub valid: u8,
     /// 1 while the front gap is within the contact gap (10 mm: the object is against the
@@ -529,7 +537,7 @@ const _: () = {
     assert!(size_of::<GroundTruth>() == 16 + 48 + 8 && align_of::<GroundTruth>() == 8);
     assert!(
         size_of::<ObjectEstimate>()
-            == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 8 + 8
+            == 72 + 8 + 24 + 24 + 16 + 16 + 16 + 8 + 16 + 16 + 8 + 8 + 8 + 16 + 8 + 8
     );
     assert!(size_of::<GridHeader>() == 8 + 4 * 4 + 8 * 8 && align_of::<GridHeader>() == 8);
     assert!(size_of::<GradientGrid>() == 88 + 4 * GRID_CELLS && align_of::<GradientGrid>() == 8);

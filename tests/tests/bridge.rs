@@ -293,32 +293,23 @@ fn a_live_session_across_the_bridge_on_the_realtime_clock_finds_the_object_and_r
     up_b.wait_for_lines("serving the goals", 1, PLACE_TIMEOUT);
     // The object where it starts: the remote planner has to find it first, circling it
     // on IR frames that cross the bridge at physics's own pace, with commands that cross
-    // back in time to steer round it; then judge that it is there.
-    //
-    // On the 2-core CI machine, with two instances of debug builds and the bridge on the
-    // realtime clock, the circling now and then loses the object (the planner ends the goal
-    // `lost`; seen in 2 of about 12 full-suite runs, never alone, cause not found): the goal
-    // is queued a second time then, and the first outcome printed. Twice lost fails.
+    // back in time to steer round it; then judge that it is there. The estimate it takes
+    // after the circling must be one made once the circling's end crossed the bridge to the
+    // estimator (the estimate's `event_seq` says so): judged by the clock alone, the
+    // estimate of a frame physics published while the event was on its way showed no match,
+    // and the goal ended `lost` (1 in 8 runs under load, 2 in about 12 full-suite runs).
+    let queued = run_agp(
+        robot.path(),
+        &["goal", "--instance", a, "--place", "0", "0", "0"],
+        TIMEOUT,
+    );
+    queued.assert_success("a goal queued on the robot side");
     let mut last = Value::Null;
-    let mut k = 0;
-    loop {
-        let queued = run_agp(
-            robot.path(),
-            &["goal", "--instance", a, "--place", "0", "0", "0"],
-            TIMEOUT,
-        );
-        queued.assert_success("a goal queued on the robot side");
-        up_b.until("the goal judged on the robot side", PLACE_TIMEOUT, || {
-            last = status_json(robot.path(), a, TIMEOUT);
-            last["goals"][k]["state"] == "done"
-        });
-        if last["goals"][k]["end"] == "done" || k == 1 {
-            break;
-        }
-        println!("attempt 1 ended: {}", last["goals"][k]);
-        k += 1;
-    }
-    let goal = &last["goals"][k];
+    up_b.until("the goal judged on the robot side", PLACE_TIMEOUT, || {
+        last = status_json(robot.path(), a, TIMEOUT);
+        last["goals"][0]["state"] == "done"
+    });
+    let goal = &last["goals"][0];
     assert_eq!(goal["success"], true, "goal not reached: {goal}");
     // The planner found the object and said it is there (not `lost`, no circling found it).
     assert_eq!(goal["end"], "done", "{goal}");

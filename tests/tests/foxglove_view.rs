@@ -275,7 +275,7 @@ fn write_recording(path: &Path) {
     let task_ch = channel(ServiceNames::TASK, "agp::Task.v2");
     let grid_ch = channel(ServiceNames::GRIDS, "agp::GradientGrid.v2");
     let frame_ch = channel(ServiceNames::IR_FRAMES, "agp::IrFrame.v2");
-    let est_ch = channel(ServiceNames::ESTIMATES, "agp::ObjectEstimate.v3");
+    let est_ch = channel(ServiceNames::ESTIMATES, "agp::ObjectEstimate.v4");
     let t0: u64 = 1_800_000_000_000_000_000;
     let mut seq = 0u32;
     let mut write = |out: &mut mcap::Writer<_>, ch: u16, t: u64, data: &[u8]| {

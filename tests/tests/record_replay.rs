@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use agp_recording::{Recording, TOPIC_COUNT, recorded_topics};
 use agp_runtime::Instance;
-use agp_shared_types::{GRIDS_PER_ALPHA, GroundTruth, IrFrame, ServiceNames};
+use agp_shared_types::{
+    GRIDS_PER_ALPHA, GroundTruth, IrFrame, LearnEvent, ObjectEstimate, ServiceNames,
+};
 use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
 
 /// Safety net only: the run takes well under a second.
@@ -156,6 +158,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
     );
     assert_eq!(count(ServiceNames::GRIDS), 3 * GRIDS_PER_ALPHA as u64);
     assert!(count(ServiceNames::ESTIMATES) > 0);
+
     for t in recorded_topics() {
         for what in ["dropped", "lost"] {
             assert_eq!(
@@ -212,4 +215,78 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
         0,
         "files of `{replay_name}` remain"
     );
+}
+
+/// A placement by the affordance planner, recorded: the estimator's answer to each of the
+/// planner's events is in the recording.
+#[test]
+fn each_estimate_names_the_newest_planner_event_the_estimator_took_in() {
+    let ag = learned_ag("triangle");
+    let name = format!("rev{}", std::process::id() % 100_000);
+    let planner = bin_path("agp-planner");
+    let launch = launch(&name, &ag).replace(
+        &format!(
+            "exec {} --mode script --pushes 2 --push-ms 300",
+            planner.display()
+        ),
+        &format!(
+            "exec {} --mode place --planner affordance",
+            planner.display()
+        ),
+    );
+    assert!(launch.contains("--mode place"), "{launch}");
+    let dir = LaunchDir::new(&launch);
+    std::fs::write(dir.path().join("truth.ready"), b"").expect("the ready marker");
+    let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);
+    run.assert_success("`agp up`");
+    let rec = Recording::open(&dir.path().join("run.mcap")).expect("a readable recording");
+    // Each planner event shows in the estimate of the next frame: its session and seq, the
+    // planner's proof that the estimate took the event in (a circling matched, a push
+    // carried on) without comparing clocks.
+    let events: Vec<LearnEvent> = rec
+        .topic_messages(ServiceNames::LEARN_EVENTS)
+        .expect("messages")
+        .map(|m| agp_recording::payload_from_bytes::<LearnEvent>(&m.data).expect("an event"))
+        .collect();
+    let estimates: Vec<ObjectEstimate> = rec
+        .topic_messages(ServiceNames::ESTIMATES)
+        .expect("messages")
+        .map(|m| agp_recording::payload_from_bytes::<ObjectEstimate>(&m.data).expect("one"))
+        .collect();
+    println!("{} events, {} estimates", events.len(), estimates.len());
+    assert!(
+        events.len() >= 4,
+        "circlings and pushes: {} events",
+        events.len()
+    );
+    for e in &events {
+        let next = estimates
+            .iter()
+            .find(|est| est.step > e.step)
+            .unwrap_or_else(|| panic!("no estimate after the event of step {}", e.step));
+        assert_eq!(
+            next.event_session, e.session,
+            "event {} of step {}",
+            e.seq, e.step
+        );
+        assert!(
+            next.event_seq >= e.seq,
+            "event {} of step {}: {}",
+            e.seq,
+            e.step,
+            next.event_seq
+        );
+    }
+    let (first, last) = (&estimates[0], estimates.last().expect("estimates"));
+    assert_eq!(
+        (first.event_session, first.event_seq),
+        (0, 0),
+        "none before the first"
+    );
+    let newest = events.last().expect("events");
+    assert_eq!(
+        (last.event_session, last.event_seq),
+        (newest.session, newest.seq)
+    );
+    assert_eq!(count_instance_files(&name), 0, "files of `{name}` remain");
 }

@@ -148,6 +148,8 @@ pub(crate) fn object_estimate() -> Layout {
             border_seen: "f64",
             grids_seq: "u64",
             estimator_start_ns: "u64",
+            event_session: "u64",
+            event_seq: "u64",
             valid: "u8",
             contact: "u8",
             learning: "u8",

@@ -244,6 +244,10 @@ struct State {
     /// The newest planner session whose task events the tracker takes (a planner swapped
     /// in supersedes the one it replaces).
     task_session: u64,
+    /// The newest event taken in: its session and seq, carried by every estimate
+    /// ([`ObjectEstimate::event_seq`]).
+    event_session: u64,
+    event_seq: u64,
     /// Step of the last frame observed (a smaller one: physics restarted).
     last_step: Option<u64>,
     /// Reset count of the last frame observed (another: the world was put back).
@@ -327,6 +331,8 @@ impl Estimator {
                 },
             ),
             task_session: 0,
+            event_session: 0,
+            event_seq: 0,
             last_step: None,
             last_reset: None,
         };
@@ -625,6 +631,7 @@ impl State {
             any = true;
             let _in_learning = alloc_count::enter(alloc_count::Region::Work);
             self.handle(&event)?;
+            (self.event_session, self.event_seq) = (event.session, event.seq);
         }
     }
 
@@ -640,6 +647,8 @@ impl State {
             grids_seq: self.grids_seq,
             learning: learning as u8,
             estimator_start_ns: self.start_ns,
+            event_session: self.event_session,
+            event_seq: self.event_seq,
             ..ObjectEstimate::default()
         };
         self.tracker.write_estimate(&mut e);

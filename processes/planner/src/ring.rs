@@ -43,9 +43,11 @@ pub struct EstimatorLink {
     reports_waiter: Waiter,
     seq: u64,
     /// When the last event went out (CLOCK_MONOTONIC, taken once it was published; 0: none
-    /// yet). The estimator drains events after it stamps a frame's receipt, so an estimate
-    /// whose frame it received at or after this took the event in.
+    /// yet). The estimator drains events after it stamps a frame's receipt, so on one machine
+    /// an estimate whose frame it received at or after this took the event in.
     sent_ns: u64,
+    /// The session of the last event sent (its seq is `seq`).
+    sent_session: u64,
     /// Publish stamp of the newest frame the estimator acknowledged.
     acked_stamp: u64,
     /// The estimate of that frame and when it was received (CLOCK_MONOTONIC), until the
@@ -149,6 +151,7 @@ impl EstimatorLink {
             ),
             seq: 0,
             sent_ns: 0,
+            sent_session: 0,
             acked_stamp: 0,
             latest: None,
             newest: None,
@@ -239,7 +242,25 @@ impl EstimatorLink {
             .map_err(|e| anyhow!("cannot send a learn event: {e:?}"))?;
         let _ = self.wake.notify();
         self.sent_ns = monotonic_ns();
+        self.sent_session = event.session;
         Ok(())
+    }
+
+    /// Whether the estimator made `e` after it took in the last event this link sent.
+    /// - The estimator's newest event is of this link's session: exactly, by its seq.
+    /// - Another planner's event came in after it (a swap under way), or none of this
+    ///   session yet: by the clock, an estimate of a frame the estimator received after the
+    ///   event was sent. That is exact on one machine, where a sent event is in the
+    ///   estimator's queue, but not across a bridge: the event arrives a link's latency
+    ///   later, and on the realtime clock physics publishes frames meanwhile (what the seq
+    ///   is for).
+    fn took_in_last_event(&self, e: &ObjectEstimate) -> bool {
+        let by_clock = e.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] >= self.sent_ns;
+        if e.event_session == self.sent_session {
+            by_clock && e.event_seq >= self.seq
+        } else {
+            by_clock
+        }
     }
 
     /// Takes the reports that arrived; returns the first of `wanted` kind among them. Called
@@ -399,18 +420,28 @@ impl Ring {
     ///   frame is not (or no longer) there to be had, and the planner would go on with an
     ///   older frame's estimate (at the start, `ObjectEstimate::default()`: a front gap of
     ///   0 and the robot at the origin);
-    /// - the frame's estimate was made before the estimator read the planner's last event
-    ///   (physics published the frame while the planner was deciding): it does not show the
-    ///   event's effect yet (a circling's match, a push carried on).
+    /// - the frame's estimate was made before the estimator took in the planner's last event
+    ///   (physics published the frame while the planner was deciding, or while the event
+    ///   crossed a bridge): it does not show the event's effect yet (a circling's match, a
+    ///   push carried on). See [`EstimatorLink::took_in_last_event`].
     fn catch_up(&mut self) -> Result<IrFrame> {
         loop {
             let f = self.frame();
             let stamp = f.timing.stamps_ns[stage::FRAME_PUBLISHED];
             let paired = self.estimate.timing.stamps_ns[stage::FRAME_PUBLISHED] == stamp;
-            let current =
-                self.estimate.timing.stamps_ns[stage::ESTIMATOR_RECEIVED] >= self.link.sent_ns;
-            if paired && current {
+            if paired && self.link.took_in_last_event(&self.estimate) {
                 return Ok(f);
+            }
+            if self.link.sent_ns > 0
+                && monotonic_ns().saturating_sub(self.link.sent_ns)
+                    > self.link.timeout.as_nanos() as u64
+            {
+                bail!(
+                    "the estimator did not take in this planner's event {} (session {}) within {:?}: is the link to `agp-estimator` dropping events?",
+                    self.link.seq,
+                    self.link.sent_session,
+                    self.link.timeout
+                );
             }
             let newer = *self.driver.await_newer_frame()?;
             self.ack(&newer)?;
