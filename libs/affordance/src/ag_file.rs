@@ -238,6 +238,26 @@ impl AffordanceGradient {
         Self::from_bytes(&bytes, path)
     }
 
+    /// The format version of the AG file at `path`, read from its header. A file of an
+    /// older version still loads, but an older learner wrote it: a benchmark that reuses
+    /// the files it learned before learns again one of another version than
+    /// [`AG_FILE_VERSION`].
+    pub fn file_version(path: impl AsRef<Path>) -> Result<u32, AgFileLoadError> {
+        let path = path.as_ref();
+        let bytes = read_bounded(path)?;
+        if !bytes.starts_with(&AG_FILE_MAGIC) {
+            return Err(AgFileLoadError::BadMagic {
+                path: path.to_owned(),
+            });
+        }
+        Reader {
+            bytes: &bytes,
+            pos: AG_FILE_MAGIC.len(),
+            path,
+        }
+        .u32()
+    }
+
     /// [`AffordanceGradient::load`], refusing a gradient learned on another object than
     /// `expected_object` (the scenario's name) with [`AgFileLoadError::WrongObject`].
     pub fn load_for(

@@ -191,6 +191,16 @@ fn a_version_1_file_still_loads_and_predicts_as_before() {
     loaded.save(dir.path().join("v2.ag")).expect("writable");
     let again = std::fs::read(dir.path().join("v2.ag")).expect("written");
     assert_eq!(again, bytes);
+    // The header tells the two apart (a benchmark reusing its files relearns the old one).
+    let version = |name: &str| AffordanceGradient::file_version(dir.path().join(name));
+    assert_eq!(version("v1.ag").expect("a header"), 1);
+    assert_eq!(version("v2.ag").expect("a header"), AG_FILE_VERSION);
+    std::fs::write(dir.path().join("not.ag"), b"GIF89a").expect("writable");
+    let err = version("not.ag").expect_err("no AG file");
+    assert!(matches!(err, AgFileLoadError::BadMagic { .. }), "{err}");
+    std::fs::write(dir.path().join("short.ag"), b"AGPAG\0\x02").expect("writable");
+    let err = version("short.ag").expect_err("no whole version");
+    assert!(matches!(err, AgFileLoadError::Truncated { .. }), "{err}");
 }
 
 #[test]

@@ -32,7 +32,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use agp_affordance::{AffordanceGradient, PushOutcome, PushPredictor, learned_border_radius_m};
+use agp_affordance::{
+    AG_FILE_VERSION, AffordanceGradient, PushOutcome, PushPredictor, learned_border_radius_m,
+};
 use agp_perception::{OnlineLearningConfig, TrackerConfig};
 use agp_physics::{Sim, SimConfig};
 use agp_planning::{
@@ -678,11 +680,24 @@ fn ag_file_of(args: &BenchAdaptArgs, scenario: &Scenario, seed: u64) -> Result<P
     }
     let dir = Path::new(bench_learn::DEFAULT_OUT).join(format!("seed-{seed}"));
     let path = bench_learn::ag_path(&dir, scenario);
-    if !path.is_file() {
-        crate::say(format_args!(
-            "no affordance gradient of `{}` learned at seed {seed} at {}: learning it first (agp bench learn --scenario {} --seed {seed} --out {})",
+    let why = if !path.is_file() {
+        Some(format!(
+            "no affordance gradient of `{}` learned at seed {seed} at {}",
             scenario.name,
-            path.display(),
+            path.display()
+        ))
+    } else {
+        let version = AffordanceGradient::file_version(&path)?;
+        (version != AG_FILE_VERSION).then(|| {
+            format!(
+                "{} was learned by an older build (AG file version {version}, this build writes {AG_FILE_VERSION})",
+                path.display()
+            )
+        })
+    };
+    if let Some(why) = why {
+        crate::say(format_args!(
+            "{why}: learning it first (agp bench learn --scenario {} --seed {seed} --out {})",
             args.scenario,
             dir.display()
         ));
