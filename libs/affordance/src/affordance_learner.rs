@@ -96,14 +96,24 @@ impl PushOutcome {
     pub fn from_poses(before: Pose2, after: Pose2, contact_point: DVec2, heading: DVec2) -> Self {
         let c0 = DVec2::new(before.x, before.y);
         let to_obj = DVec2::from_angle(-before.theta);
-        let rotation =
-            angle::wrap_to_half_period(after.theta - before.theta, std::f64::consts::TAU);
+        let (displacement_obj, rotation_rad) = Self::motion(before, after);
         Self {
             contact_point_obj: to_obj.rotate(contact_point - c0),
-            displacement_obj: to_obj.rotate(DVec2::new(after.x, after.y) - c0),
-            rotation_rad: rotation,
+            displacement_obj,
+            rotation_rad,
             heading_obj: to_obj.rotate(heading),
         }
+    }
+
+    /// The object's motion alone from its poses before and after a push: the displacement
+    /// in its frame before the push, and the rotation wrapped to (-pi, pi] (what
+    /// [`Self::from_poses`] puts in `displacement_obj` and `rotation_rad`).
+    pub fn motion(before: Pose2, after: Pose2) -> (DVec2, f64) {
+        let to_obj = DVec2::from_angle(-before.theta);
+        let displacement = to_obj.rotate(DVec2::new(after.x - before.x, after.y - before.y));
+        let rotation =
+            angle::wrap_to_half_period(after.theta - before.theta, std::f64::consts::TAU);
+        (displacement, rotation)
     }
 
     /// Whether the push met the border past the centroid

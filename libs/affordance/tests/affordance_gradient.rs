@@ -1,6 +1,6 @@
 mod support;
 
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use agp_affordance::{
     AffordanceGradient, AffordanceLearner, LearnerBuildError, LearnerConfig, PushOutcome,
@@ -249,6 +249,24 @@ fn write_component_fills_a_payload_with_the_grid_of_means() {
     // Means, not sums: the x displacement on the trial at phi = 0 is about -24 mm.
     let px = ag.component(0.0, GridKind::PositionX).expect("learned");
     assert!((f64::from(px.sample(contact(0.0))) + 0.024).abs() < 0.0005);
+}
+
+#[test]
+fn the_motion_alone_is_in_the_objects_frame_before_the_push_and_wrapped() {
+    // Facing +y, the object moves 0.1 m along +y (its own +x) and turns 30 deg.
+    let (d, r) = PushOutcome::motion(
+        Pose2::new(1.0, 2.0, FRAC_PI_2),
+        Pose2::new(1.0, 2.1, FRAC_PI_2 + 30f64.to_radians()),
+    );
+    assert!(d.distance(DVec2::new(0.1, 0.0)) < 1e-12, "{d}");
+    assert!((r - 30f64.to_radians()).abs() < 1e-12);
+    // Turned 350 deg counter-clockwise is turned 10 deg clockwise.
+    let (d, r) = PushOutcome::motion(
+        Pose2::new(0.0, 0.0, 0.0),
+        Pose2::new(0.0, 0.0, 350f64.to_radians()),
+    );
+    assert_eq!(d, DVec2::ZERO);
+    assert!((r + 10f64.to_radians()).abs() < 1e-12, "{r}");
 }
 
 #[test]

@@ -180,9 +180,8 @@ impl OnlineLearner {
         }
         let predicted = PushPredictor::borrowing(self.learner.gradient(), shape, start_radius_m)
             .predict(push.contact_obj, push.alpha_deg)?;
-        // The contact is already in the object frame: `raw` gives the motion alone.
-        let raw = PushOutcome::from_poses(push.before, after, push.contact_obj, DVec2::X);
-        let displacement = raw.displacement_obj / push.scale;
+        let (raw_displacement, raw_rotation) = PushOutcome::motion(push.before, after);
+        let displacement = raw_displacement / push.scale;
         // Out of any push's reach: a bad match, not a push.
         if !displacement.is_finite() || displacement.length() > 0.2 {
             return None;
@@ -192,10 +191,10 @@ impl OnlineLearner {
         let rotation_rad = if period_rad == 0.0 {
             predicted.rotation_rad
         } else if period_rad.is_finite() {
-            (expected + angle::wrap_to_half_period(raw.rotation_rad - expected, period_rad))
+            (expected + angle::wrap_to_half_period(raw_rotation - expected, period_rad))
                 / push.scale
         } else {
-            raw.rotation_rad / push.scale
+            raw_rotation / push.scale
         };
         // The planner's push: from the start circle's nearest point, as predicted.
         let heading_obj = approach_start(push.contact_obj, push.alpha_deg, start_radius_m)

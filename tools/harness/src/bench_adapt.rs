@@ -237,8 +237,7 @@ impl World for JudgedWorld {
             Some(LearnEventKind::TaskPushEnd) => {
                 if let Some((aim, alpha, scale, before, estimated_theta)) = self.push.take() {
                     let after = self.inner.sim().object_pose();
-                    // The motion alone is scored: contact and heading are placeholders.
-                    let truth = PushOutcome::from_poses(before, after, before.position(), DVec2::X);
+                    let (true_displacement, true_rotation) = PushOutcome::motion(before, after);
                     // Both in the world frame: the prediction is in the frame of the pose
                     // the estimator held (its orientation is known modulo the symmetry),
                     // the truth in the object's true frame.
@@ -250,9 +249,9 @@ impl World for JudgedWorld {
                             episode: self.episode,
                             after_change: self.after_change,
                             predicted_mm: to_world(estimated_theta, p.displacement * scale) * 1e3,
-                            true_mm: to_world(before.theta, truth.displacement_obj) * 1e3,
+                            true_mm: to_world(before.theta, true_displacement) * 1e3,
                             predicted_deg: (p.rotation_rad * scale).to_degrees(),
-                            true_deg: truth.rotation_rad.to_degrees(),
+                            true_deg: true_rotation.to_degrees(),
                         });
                     }
                 }
