@@ -283,13 +283,24 @@ class Link:
             for k in sorted(self._recent)[:-16]:
                 del self._recent[k]
 
+    def _took_in(self, e):
+        """Whether the estimator made `e` after it took in this planner's last event. By the
+        event's seq when the estimator's newest event is of this planner's session: exact even
+        across `agp bridge`, where an event arrives a link's latency after it left. Otherwise
+        (a planner swapped in sent since) by the clock: a frame the estimator received after
+        the event went out, exact on one machine."""
+        by_clock = e.timing.stamps_ns[ESTIMATOR_RECEIVED] >= self.sent_ns
+        if e.event_session == self.epoch + 1:
+            return by_clock and e.event_seq >= self.seq
+        return by_clock
+
     def _wait(self, after_step):
         deadline = time.monotonic() + self.timeout_s
         while True:
             self._drain()
             e = self._newest
             f = self._recent.get(e.timing.stamps_ns[FRAME_PUBLISHED])
-            if f is not None and f.step > after_step and e.timing.stamps_ns[ESTIMATOR_RECEIVED] >= self.sent_ns:
+            if f is not None and f.step > after_step and self._took_in(e):
                 self.received_ns = time.monotonic_ns()
                 self.frame = f
                 ctypes.memmove(ctypes.addressof(self.est), ctypes.addressof(e), ctypes.sizeof(ObjectEstimate))
