@@ -16,6 +16,10 @@ use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, ru
 /// Safety net only: the run takes well under a second.
 const TIMEOUT: Duration = Duration::from_secs(120);
 
+/// One pipeline at a time: the scripted run's counts should not depend on a placement
+/// running beside it on the two cores.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// A short lockstep run recorded into `run.mcap`: physics, the estimator serving a learned
 /// triangle, and the scripted drive (two pushes, each from a reset). `agp up` starts the
 /// recorder first and the others once it has subscribed (its file exists); the planner
@@ -55,7 +59,8 @@ ends_run = true
 }
 
 /// Reads the instance's ground truth (as the judge does) from when its supervisor is up
-/// until `stop`; the latest sample. Says it listens by creating `ready`.
+/// until `stop`; the latest sample. Says it listens, and that the estimator published its
+/// grids, by creating `ready`.
 fn truth_reader(
     name: String,
     ready: std::path::PathBuf,
@@ -76,6 +81,25 @@ fn truth_reader(
             .subscriber_builder()
             .create()
             .expect("a ground truth subscriber");
+        // The planner starts once the estimator published its whole grid set: the scripted
+        // drive is over in a fraction of a second, and on a loaded machine it ended before
+        // the estimator had loaded and published the set (43 of 51 recorded, then).
+        let grids = instance
+            .grids(&node)
+            .expect("the grids topic")
+            .data
+            .subscriber_builder()
+            .create()
+            .expect("a grids subscriber");
+        let mut seen = 0;
+        while seen < 3 * GRIDS_PER_ALPHA {
+            assert!(Instant::now() < deadline, "{seen} grids published");
+            while let Ok(Some(_)) = grids.receive() {
+                seen += 1;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        drop(grids);
         std::fs::write(&ready, b"").expect("write the ready marker");
         let mut last: Option<GroundTruth> = None;
         loop {
@@ -99,6 +123,7 @@ fn bits(v: f64) -> String {
 
 #[test]
 fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_bit_for_bit() {
+    let _alone = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let ag = learned_ag("triangle");
     let name = format!("rec{}", std::process::id() % 100_000);
     let replay_name = format!("rpl{}", std::process::id() % 100_000);
@@ -221,6 +246,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
 /// planner's events is in the recording.
 #[test]
 fn each_estimate_names_the_newest_planner_event_the_estimator_took_in() {
+    let _alone = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let ag = learned_ag("triangle");
     let name = format!("rev{}", std::process::id() % 100_000);
     let planner = bin_path("agp-planner");

@@ -531,12 +531,12 @@ impl Qos {
     }
 
     /// Gradient grids: a whole set ([`GRIDS_PER_ALPHA`] grids for each of up to
-    /// [`MAX_GRID_ALPHAS`] alphas: 88 grids of 65,624 bytes, 5.8 MB) kept in history,
+    /// [`MAX_GRID_ALPHAS`] alphas: 136 grids of 65,624 bytes, 8.9 MB) kept in history,
     /// so a late or restarted reader gets all of it, and fitting each reader's buffer, so a
     /// reader that drains only after the publication loses none.
     ///
     /// Each publisher preallocates `max_subscribers * (buffer + 2 borrowed) + history + 2
-    /// loaned` samples: 450 grids, about 30 MB of shared memory. Subscribers: the planner,
+    /// loaned` samples: 690 grids, about 45 MB of shared memory. Subscribers: the planner,
     /// a hot-swapped one beside it, and one tool or test.
     fn grids() -> Self {
         let set = GRIDS_PER_ALPHA * MAX_GRID_ALPHAS;
