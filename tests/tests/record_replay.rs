@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use agp_recording::{Recording, TOPIC_COUNT, recorded_topics};
+use agp_recording::{Plain, Recording, TOPIC_COUNT, recorded_topics};
 use agp_runtime::Instance;
 use agp_shared_types::{
     GRIDS_PER_ALPHA, GroundTruth, IrFrame, LearnEvent, ObjectEstimate, ServiceNames,
@@ -26,7 +26,7 @@ static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 /// (through `sh`) also waits for the test's own ground-truth reader (`truth.ready`).
 /// Nothing runs at another priority: the recorder's buffers (`agp_runtime::TAP_DEPTH`)
 /// hold seconds of the ring at full lockstep speed.
-fn launch(instance: &str, ag: &std::path::Path) -> String {
+fn launch(instance: &str, ag: &std::path::Path, planner_args: &str) -> String {
     let planner = bin_path("agp-planner");
     let estimator = bin_path("agp-estimator");
     format!(
@@ -49,7 +49,7 @@ args = ["--load", "{ag}"]
 [[process]]
 name = "planner"
 exec = "/bin/sh"
-args = ["-c", "while [ ! -e truth.ready ]; do sleep 0.01; done; exec {planner} --mode script --pushes 2 --push-ms 300"]
+args = ["-c", "while [ ! -e truth.ready ]; do sleep 0.01; done; exec {planner} {planner_args}"]
 ends_run = true
 "#,
         ag = ag.display(),
@@ -117,6 +117,14 @@ fn truth_reader(
     })
 }
 
+/// Every message of `topic` in the recording, as its payload.
+fn payloads<T: Plain>(rec: &Recording, topic: &str) -> Vec<T> {
+    rec.topic_messages(topic)
+        .expect("messages")
+        .map(|m| agp_recording::payload_from_bytes::<T>(&m.data).expect("a whole payload"))
+        .collect()
+}
+
 fn bits(v: f64) -> String {
     format!("{:#018x}", v.to_bits())
 }
@@ -127,7 +135,11 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
     let ag = learned_ag("triangle");
     let name = format!("rec{}", std::process::id() % 100_000);
     let replay_name = format!("rpl{}", std::process::id() % 100_000);
-    let dir = LaunchDir::new(&launch(&name, &ag));
+    let dir = LaunchDir::new(&launch(
+        &name,
+        &ag,
+        "--mode script --pushes 2 --push-ms 300",
+    ));
     let stop = Arc::new(AtomicBool::new(false));
     let reader = truth_reader(
         name.clone(),
@@ -165,11 +177,7 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
     // one per reset; the planner one command per step and two resets; the estimator a
     // whole set of 3 alphas x `GRIDS_PER_ALPHA` grids. The recorder dropped nothing and lost nothing.
     let count = |topic: &str| rec.channel(topic).map_or(0, |c| c.messages);
-    let frames: Vec<IrFrame> = rec
-        .topic_messages(ServiceNames::IR_FRAMES)
-        .expect("messages")
-        .map(|m| agp_recording::payload_from_bytes::<IrFrame>(&m.data).expect("a frame"))
-        .collect();
+    let frames: Vec<IrFrame> = payloads(&rec, ServiceNames::IR_FRAMES);
     let last_step = frames.last().expect("frames").step;
     assert_eq!(frames[0].step, 0, "the recording starts with the run");
     assert_eq!(last_step, truth.step, "the last frame is the final state's");
@@ -249,18 +257,7 @@ fn each_estimate_names_the_newest_planner_event_the_estimator_took_in() {
     let _alone = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let ag = learned_ag("triangle");
     let name = format!("rev{}", std::process::id() % 100_000);
-    let planner = bin_path("agp-planner");
-    let launch = launch(&name, &ag).replace(
-        &format!(
-            "exec {} --mode script --pushes 2 --push-ms 300",
-            planner.display()
-        ),
-        &format!(
-            "exec {} --mode place --planner affordance",
-            planner.display()
-        ),
-    );
-    assert!(launch.contains("--mode place"), "{launch}");
+    let launch = launch(&name, &ag, "--mode place --planner affordance");
     let dir = LaunchDir::new(&launch);
     std::fs::write(dir.path().join("truth.ready"), b"").expect("the ready marker");
     let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);
@@ -269,16 +266,8 @@ fn each_estimate_names_the_newest_planner_event_the_estimator_took_in() {
     // Each planner event shows in the estimate of the next frame: its session and seq, the
     // planner's proof that the estimate took the event in (a circling matched, a push
     // carried on) without comparing clocks.
-    let events: Vec<LearnEvent> = rec
-        .topic_messages(ServiceNames::LEARN_EVENTS)
-        .expect("messages")
-        .map(|m| agp_recording::payload_from_bytes::<LearnEvent>(&m.data).expect("an event"))
-        .collect();
-    let estimates: Vec<ObjectEstimate> = rec
-        .topic_messages(ServiceNames::ESTIMATES)
-        .expect("messages")
-        .map(|m| agp_recording::payload_from_bytes::<ObjectEstimate>(&m.data).expect("one"))
-        .collect();
+    let events: Vec<LearnEvent> = payloads(&rec, ServiceNames::LEARN_EVENTS);
+    let estimates: Vec<ObjectEstimate> = payloads(&rec, ServiceNames::ESTIMATES);
     println!("{} events, {} estimates", events.len(), estimates.len());
     assert!(
         events.len() >= 4,
