@@ -171,6 +171,170 @@ fn rpose(p: Pose) -> RPose {
     RPose::new(RVec::new(p.x as f32, p.y as f32), p.theta as f32)
 }
 
+/// Refuses a step rate, robot description or floor model the simulator cannot run; returns
+/// the object's linear and angular velocity damping (1/s), zero but for the damping floor.
+fn check_config(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    config: SimConfig,
+) -> Result<(f64, f64), SimBuildError> {
+    if !(config.step_hz.is_finite() && config.step_hz >= robot.ir_rate_hz) {
+        return Err(SimBuildError::StepRate {
+            step_hz: config.step_hz,
+            ir_rate_hz: robot.ir_rate_hz,
+        });
+    }
+    for (name, v) in [
+        ("body_radius", robot.body_radius),
+        ("axle_length", robot.axle_length),
+        ("max_wheel_speed", robot.max_wheel_speed),
+        ("ir_rate_hz", robot.ir_rate_hz),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(SimBuildError::Robot(name));
+        }
+    }
+    if scenario.robot.drive == RobotDrive::FiniteForce {
+        for (name, v) in [
+            ("mass", robot.mass),
+            ("wheel_radius", robot.wheel_radius),
+            ("wheel_friction", robot.wheel_friction),
+            ("wheel_torque", robot.wheel_torque),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SimBuildError::Robot(name));
+            }
+        }
+    }
+    if robot.ir_sensors.len() != IR_COUNT {
+        return Err(SimBuildError::SensorCount(robot.ir_sensors.len()));
+    }
+    match config.floor {
+        FloorModel::Coulomb { cells } if !(1..=10_000).contains(&cells) => {
+            Err(SimBuildError::FootprintCells(cells))
+        }
+        FloorModel::Coulomb { .. } => Ok((0.0, 0.0)),
+        FloorModel::Damping { linear, angular } => {
+            if !(linear.is_finite() && linear >= 0.0 && angular.is_finite() && angular >= 0.0) {
+                return Err(SimBuildError::Damping { linear, angular });
+            }
+            Ok((linear, angular))
+        }
+    }
+}
+
+/// A rapier world without gravity, stepping `dt`, with its tolerances at our scale and a
+/// speculative margin that covers a step of the robot at full speed.
+fn empty_world(robot: &RobotDescription, dt: f64) -> PhysicsWorld {
+    let mut world = PhysicsWorld::new();
+    world.gravity = RVec::ZERO;
+    let params = &mut world.integration_parameters;
+    params.dt = dt as f32;
+    params.length_unit = LENGTH_UNIT;
+    // The speculative margin must cover a step of the robot at full speed, or contacts
+    // would be found only after the robot has sunk into the object.
+    let travel = (2.0 * robot.max_wheel_speed * dt) as f32 / LENGTH_UNIT;
+    params.normalized_prediction_distance = params.normalized_prediction_distance.max(travel);
+    // Recycled contacts may be stale by the recycle distance: keep every step exact.
+    params.contact_recycling = false;
+    world
+}
+
+/// Puts the robot's body (dynamic for the finite-force drive, else kinematic) and its round
+/// collider at the scenario's start pose; returns their handles.
+fn insert_robot(
+    world: &mut PhysicsWorld,
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    finite_force: bool,
+) -> (RigidBodyHandle, ColliderHandle) {
+    let body = world.insert_body(if finite_force {
+        RigidBodyBuilder::dynamic()
+            .pose(rpose(scenario.robot.start))
+            .can_sleep(false)
+    } else {
+        RigidBodyBuilder::kinematic_position_based().pose(rpose(scenario.robot.start))
+    });
+    let collider = world.insert_collider(
+        ColliderBuilder::ball(robot.body_radius as f32)
+            .mass(robot.mass as f32)
+            .friction(scenario.object.contact_friction as f32)
+            .friction_combine_rule(CoefficientCombineRule::Min)
+            .restitution(0.0),
+        Some(body),
+    );
+    (body, collider)
+}
+
+/// The object as [`insert_object`] put it into the world.
+struct ObjectParts {
+    body: RigidBodyHandle,
+    /// The first piece's collider, which carries the whole mass and inertia.
+    mass_collider: Option<ColliderHandle>,
+    /// How many convex pieces (colliders) the object has.
+    pieces: usize,
+    /// The whole shape: the one piece, or a compound of them.
+    shape: SharedShape,
+    /// Moment of inertia about the centroid, kg m^2.
+    inertia: f64,
+    /// Moment of inertia per unit mass about the centroid, m^2.
+    inertia_per_mass: f64,
+}
+
+/// Puts the object's dynamic body at its start pose, with the given velocity damping, and
+/// one collider per convex piece of its shape.
+fn insert_object(
+    world: &mut PhysicsWorld,
+    scenario: &Scenario,
+    (linear_damping, angular_damping): (f64, f64),
+) -> Result<ObjectParts, SimBuildError> {
+    let obj = &scenario.object;
+    let (pieces, inertia_per_mass) = object_pieces(&obj.shape)?;
+    let inertia = obj.mass * inertia_per_mass;
+    let body = world.insert_body(
+        RigidBodyBuilder::dynamic()
+            .pose(rpose(obj.start))
+            .can_sleep(false)
+            .linear_damping(linear_damping as f32)
+            .angular_damping(angular_damping as f32),
+    );
+    // One collider per convex piece, all on the object's body, rather than one compound
+    // collider: rapier's contacts with a compound shape (parry's composite manifolds)
+    // allocate on every step, convex pieces do not. The first piece carries the whole
+    // plate's mass and inertia about the centroid, the others none.
+    let mut mass_collider = None;
+    for (k, piece) in pieces.iter().enumerate() {
+        let mass = if k == 0 {
+            MassProperties::new(RVec::ZERO, obj.mass as f32, inertia as f32)
+        } else {
+            MassProperties::new(RVec::ZERO, 0.0, 0.0)
+        };
+        let handle = world.insert_collider(
+            ColliderBuilder::new(piece.clone())
+                .mass_properties(mass)
+                .friction(obj.contact_friction as f32)
+                .friction_combine_rule(CoefficientCombineRule::Min)
+                .restitution(0.0),
+            Some(body),
+        );
+        mass_collider.get_or_insert(handle);
+    }
+    let count = pieces.len();
+    let shape = if count == 1 {
+        pieces.into_iter().next().expect("one piece")
+    } else {
+        SharedShape::compound(pieces.into_iter().map(|p| (RPose::IDENTITY, p)).collect())
+    };
+    Ok(ObjectParts {
+        body,
+        mass_collider,
+        pieces: count,
+        shape,
+        inertia,
+        inertia_per_mass,
+    })
+}
+
 impl Sim {
     /// Builds the world of `scenario` with `robot` at their start poses, and takes the
     /// first sensor sample.
@@ -179,117 +343,13 @@ impl Sim {
         robot: &RobotDescription,
         config: SimConfig,
     ) -> Result<Sim, SimBuildError> {
-        if !(config.step_hz.is_finite() && config.step_hz >= robot.ir_rate_hz) {
-            return Err(SimBuildError::StepRate {
-                step_hz: config.step_hz,
-                ir_rate_hz: robot.ir_rate_hz,
-            });
-        }
-        for (name, v) in [
-            ("body_radius", robot.body_radius),
-            ("axle_length", robot.axle_length),
-            ("max_wheel_speed", robot.max_wheel_speed),
-            ("ir_rate_hz", robot.ir_rate_hz),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(SimBuildError::Robot(name));
-            }
-        }
-        if scenario.robot.drive == RobotDrive::FiniteForce {
-            for (name, v) in [
-                ("mass", robot.mass),
-                ("wheel_radius", robot.wheel_radius),
-                ("wheel_friction", robot.wheel_friction),
-                ("wheel_torque", robot.wheel_torque),
-            ] {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(SimBuildError::Robot(name));
-                }
-            }
-        }
-        if robot.ir_sensors.len() != IR_COUNT {
-            return Err(SimBuildError::SensorCount(robot.ir_sensors.len()));
-        }
-        let (linear_damping, angular_damping) = match config.floor {
-            FloorModel::Coulomb { cells } if !(1..=10_000).contains(&cells) => {
-                return Err(SimBuildError::FootprintCells(cells));
-            }
-            FloorModel::Coulomb { .. } => (0.0, 0.0),
-            FloorModel::Damping { linear, angular } => {
-                if !(linear.is_finite() && linear >= 0.0 && angular.is_finite() && angular >= 0.0) {
-                    return Err(SimBuildError::Damping { linear, angular });
-                }
-                (linear, angular)
-            }
-        };
-
+        let (linear_damping, angular_damping) = check_config(scenario, robot, config)?;
         let dt = 1.0 / config.step_hz;
         let obj = &scenario.object;
-        let mut world = PhysicsWorld::new();
-        world.gravity = RVec::ZERO;
-        let params = &mut world.integration_parameters;
-        params.dt = dt as f32;
-        params.length_unit = LENGTH_UNIT;
-        // The speculative margin must cover a step of the robot at full speed, or contacts
-        // would be found only after the robot has sunk into the object.
-        let travel = (2.0 * robot.max_wheel_speed * dt) as f32 / LENGTH_UNIT;
-        params.normalized_prediction_distance = params.normalized_prediction_distance.max(travel);
-        // Recycled contacts may be stale by the recycle distance: keep every step exact.
-        params.contact_recycling = false;
-
+        let mut world = empty_world(robot, dt);
         let finite_force = scenario.robot.drive == RobotDrive::FiniteForce;
-        let robot_body = world.insert_body(if finite_force {
-            RigidBodyBuilder::dynamic()
-                .pose(rpose(scenario.robot.start))
-                .can_sleep(false)
-        } else {
-            RigidBodyBuilder::kinematic_position_based().pose(rpose(scenario.robot.start))
-        });
-        let robot_collider = world.insert_collider(
-            ColliderBuilder::ball(robot.body_radius as f32)
-                .mass(robot.mass as f32)
-                .friction(obj.contact_friction as f32)
-                .friction_combine_rule(CoefficientCombineRule::Min)
-                .restitution(0.0),
-            Some(robot_body),
-        );
-
-        let (pieces, inertia_per_mass) = object_pieces(&obj.shape)?;
-        let object_inertia = obj.mass * inertia_per_mass;
-        let object_body = world.insert_body(
-            RigidBodyBuilder::dynamic()
-                .pose(rpose(obj.start))
-                .can_sleep(false)
-                .linear_damping(linear_damping as f32)
-                .angular_damping(angular_damping as f32),
-        );
-        // One collider per convex piece, all on the object's body, rather than one compound
-        // collider: rapier's contacts with a compound shape (parry's composite manifolds)
-        // allocate on every step, convex pieces do not. The first piece carries the whole
-        // plate's mass and inertia about the centroid, the others none.
-        let mut object_mass_collider = None;
-        for (k, piece) in pieces.iter().enumerate() {
-            let mass = if k == 0 {
-                MassProperties::new(RVec::ZERO, obj.mass as f32, object_inertia as f32)
-            } else {
-                MassProperties::new(RVec::ZERO, 0.0, 0.0)
-            };
-            let handle = world.insert_collider(
-                ColliderBuilder::new(piece.clone())
-                    .mass_properties(mass)
-                    .friction(obj.contact_friction as f32)
-                    .friction_combine_rule(CoefficientCombineRule::Min)
-                    .restitution(0.0),
-                Some(object_body),
-            );
-            object_mass_collider.get_or_insert(handle);
-        }
-        let object_pieces = pieces.len();
-        let object_shape = if object_pieces == 1 {
-            pieces.into_iter().next().expect("one piece")
-        } else {
-            SharedShape::compound(pieces.into_iter().map(|p| (RPose::IDENTITY, p)).collect())
-        };
+        let (robot_body, robot_collider) = insert_robot(&mut world, scenario, robot, finite_force);
+        let object = insert_object(&mut world, scenario, (linear_damping, angular_damping))?;
         let floor = match config.floor {
             FloorModel::Coulomb { cells } => Some(FloorFriction::new(
                 &obj.shape,
@@ -305,7 +365,7 @@ impl Sim {
             let hold = floor.as_ref().map(|f| {
                 FloorHold::new(
                     &mut world,
-                    object_body,
+                    object.body,
                     obj.start,
                     f.max_force(),
                     f.max_torque(),
@@ -322,10 +382,10 @@ impl Sim {
             config,
             world,
             robot_body,
-            object_body,
-            object_pieces,
-            object_shape,
-            object_inertia,
+            object_body: object.body,
+            object_pieces: object.pieces,
+            object_shape: object.shape,
+            object_inertia: object.inertia,
             floor,
             dt,
             step_count: 0,
@@ -335,8 +395,8 @@ impl Sim {
             wheel_drive,
             floor_hold,
             robot_collider,
-            object_mass_collider,
-            inertia_per_mass,
+            object_mass_collider: object.mass_collider,
+            inertia_per_mass: object.inertia_per_mass,
             next_change: 0,
         };
         let (robot_pose, object_pose) = (sim.robot_pose, sim.object_pose());
