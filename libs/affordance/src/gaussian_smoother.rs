@@ -173,12 +173,17 @@ impl GaussianSmoother {
         let out = &mut self.scratch[self.radius * N..self.radius * N + GRID_CELLS];
         #[cfg(target_arch = "x86_64")]
         match self.simd {
-            // SAFETY: `simd` says what the CPU reported.
             Simd::Avx512 => {
+                // SAFETY: `simd` is `Avx512` only when this CPU reported AVX-512F and FMA
+                // (`Simd::detect`, or `Simd::runnable` in the tests), the features the
+                // function is compiled for.
                 unsafe { rows_pass_avx512(&self.kernel, &mut self.padded_row, src, out) };
                 return;
             }
             Simd::Avx2 => {
+                // SAFETY: `simd` is `Avx2` only when this CPU reported FMA and AVX2 or
+                // AVX-512F, which includes AVX2 (`Simd::detect`, or `Simd::runnable` in the
+                // tests): the features the function is compiled for.
                 unsafe { rows_pass_avx2(&self.kernel, &mut self.padded_row, src, out) };
                 return;
             }
@@ -191,12 +196,17 @@ impl GaussianSmoother {
     fn columns_pass(&self, dst: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         match self.simd {
-            // SAFETY: `simd` says what the CPU reported.
             Simd::Avx512 => {
+                // SAFETY: `simd` is `Avx512` only when this CPU reported AVX-512F and FMA
+                // (`Simd::detect`, or `Simd::runnable` in the tests), the features the
+                // function is compiled for.
                 unsafe { columns_pass_avx512(&self.kernel, &self.scratch, dst) };
                 return;
             }
             Simd::Avx2 => {
+                // SAFETY: `simd` is `Avx2` only when this CPU reported FMA and AVX2 or
+                // AVX-512F, which includes AVX2 (`Simd::detect`, or `Simd::runnable` in the
+                // tests): the features the function is compiled for.
                 unsafe { columns_pass_avx2(&self.kernel, &self.scratch, dst) };
                 return;
             }

@@ -881,10 +881,13 @@ fn cells_body(rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut 
 /// ([`Simd::detect`] or narrower).
 fn cells_at(simd: Simd, rotation: CellRotation, rel_x: &[f64], rel_y: &[f64], cells: &mut [u32]) {
     match simd {
-        // SAFETY: the caller's `simd` is one the CPU reported.
+        // SAFETY: the callers pass the matcher's `simd` (from `Simd::detect`) or one of
+        // `Simd::runnable` (the tests): `Avx512` only where this CPU reported AVX-512F and
+        // FMA, the features `cells_avx512` is compiled for.
         #[cfg(target_arch = "x86_64")]
         Simd::Avx512 => unsafe { cells_avx512(rotation, rel_x, rel_y, cells) },
-        // SAFETY: as above.
+        // SAFETY: likewise `Avx2` only where this CPU reported FMA and AVX2 (or AVX-512F,
+        // which includes it), the features `cells_avx2` is compiled for.
         #[cfg(target_arch = "x86_64")]
         Simd::Avx2 => unsafe { cells_avx2(rotation, rel_x, rel_y, cells) },
         _ => cells_body(rotation, rel_x, rel_y, cells),

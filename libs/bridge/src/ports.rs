@@ -27,17 +27,28 @@ use crate::route::BridgedTopic;
 /// of the right length into a loaned sample as a value.
 pub(crate) unsafe trait Wire: std::fmt::Debug + ZeroCopySend + 'static {}
 
-// SAFETY: each is `agp_recording::Plain` (checked there: every byte belongs to a field) or,
-// for the grid, a `GridHeader` (Plain) followed by an array of f32.
+// Each payload below is `agp_recording::Plain` (`#[repr(C)]` integers and floats, padding
+// spelled out; agp-recording's layout test checks that every byte belongs to a field), or,
+// for the grid, a `GridHeader` (Plain) followed by an array of f32: the promise `Wire` asks.
+// SAFETY: `IrFrame` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for IrFrame {}
+// SAFETY: `ObjectEstimate` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for ObjectEstimate {}
+// SAFETY: a `GridHeader` (Plain) then `[f32; N]`: every byte a field, any bits a value.
 unsafe impl Wire for GradientGrid {}
+// SAFETY: `LearnReport` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for LearnReport {}
+// SAFETY: `LearnEvent` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for LearnEvent {}
+// SAFETY: `Task` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for Task {}
+// SAFETY: `Reset` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for Reset {}
+// SAFETY: `MotorCommand` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for MotorCommand {}
+// SAFETY: `Goal` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for Goal {}
+// SAFETY: `GoalEnd` is `agp_recording::Plain`: every byte a field, any bits a value.
 unsafe impl Wire for GoalEnd {}
 
 /// How the receiving end changes the fields that belong to its own instance before it

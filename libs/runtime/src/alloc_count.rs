@@ -82,24 +82,28 @@ impl Counting {
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         self.count();
-        // SAFETY: forwarded with the caller's guarantees.
+        // SAFETY: the caller's promise to `GlobalAlloc::alloc` (a layout of non-zero size)
+        // is all `System.alloc` asks, and it gets the layout unchanged.
         unsafe { System.alloc(layout) }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         self.count();
-        // SAFETY: forwarded with the caller's guarantees.
+        // SAFETY: as for `alloc`: a non-zero-sized layout, passed on unchanged.
         unsafe { System.alloc_zeroed(layout) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded with the caller's guarantees.
+        // SAFETY: every block this allocator hands out is `System`'s (each method forwards
+        // to it), so `ptr` with the layout it was allocated with, as the caller promises,
+        // is a block of `System`'s to free.
         unsafe { System.dealloc(ptr, layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         self.count();
-        // SAFETY: forwarded with the caller's guarantees.
+        // SAFETY: `ptr` is `System`'s block of `layout` (as for `dealloc`), and the caller
+        // promises a non-zero `new_size` that does not overflow at `layout`'s alignment.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }

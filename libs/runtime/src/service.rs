@@ -97,6 +97,8 @@ fn take_block() -> Option<NonNull<u8>> {
             for i in (0..BLOCKS_PER_REFILL).rev() {
                 // SAFETY: block i lies inside the allocation, aligned to BLOCK_ALIGN.
                 let block = unsafe { base.add(i * BLOCK_BYTES) };
+                // SAFETY: the block is fresh memory nothing else points to, BLOCK_BYTES
+                // long and aligned to BLOCK_ALIGN: room and alignment for one pointer.
                 unsafe { block.cast::<*mut u8>().write(next) };
                 next = block;
             }
@@ -115,6 +117,9 @@ fn take_block() -> Option<NonNull<u8>> {
 /// `block` came from [`take_block`] on this thread and nothing uses it any more.
 unsafe fn give_block(block: NonNull<u8>) {
     FREE.with(|free| {
+        // SAFETY: the caller gives the block up (it came from `take_block` on this thread
+        // and nothing uses it), so its first word is ours to overwrite; every block is
+        // BLOCK_BYTES long and BLOCK_ALIGN aligned, room and alignment for a pointer.
         unsafe { block.as_ptr().cast::<*mut u8>().write(free.get()) };
         free.set(block.as_ptr());
     });
@@ -175,8 +180,14 @@ impl<T> PooledRc<T> {
     /// Called once, by the last reference, on the thread that made it.
     unsafe fn release(&self) {
         if Self::fits_a_block() {
+            // SAFETY: a `T` that fits a block was put in one by `try_new`, from this
+            // thread's pool: `PooledRc` is neither `Send` nor `Sync`, so the last
+            // reference is on the thread that made it, and after it nothing uses the block.
             unsafe { give_block(self.inner.cast()) };
         } else {
+            // SAFETY: a `T` that does not fit a block was boxed and leaked by `try_new`, so
+            // the pointer is a `Box`'s; `ManuallyDrop` (same layout as `Inner<T>`) frees the
+            // memory without dropping the value, which the caller dropped or abandoned.
             drop(unsafe {
                 Box::from_raw(
                     self.inner
@@ -228,8 +239,13 @@ impl<T: Send + Debug + Abandonable> Abandonable for PooledRc<T> {
     unsafe fn abandon_in_place(this: NonNull<Self>) {
         // As iceoryx2's own single-threaded policy: the last reference abandons the value
         // (and leaves its memory), any other just lets go of its share.
+        // SAFETY: the caller promises `this` points to a valid, constructed, not yet dropped
+        // `PooledRc` (the trait's contract), so it may be borrowed for this call.
         let this = unsafe { this.as_ref() };
         if this.strong_count() == 1 {
+            // SAFETY: the last reference: the value is alive (never dropped, as `this`
+            // was not) and nobody else can reach it, so it is abandoned once, in place; the
+            // pointer to a field of a live allocation is non-null.
             unsafe {
                 T::abandon_in_place(NonNull::new_unchecked(core::ptr::addr_of_mut!(
                     (*this.inner.as_ptr()).value
