@@ -451,106 +451,7 @@ impl Scenario {
         if let Some(why) = bad_name(&name) {
             return Err(err(file.name.span(), why));
         }
-
-        let o = &file.object;
-        let shape = match o.shape.get_ref().as_str() {
-            "polygon" => {
-                let Some(vs) = &o.vertices_mm else {
-                    return Err(err(o.shape.span(), "a polygon needs `vertices_mm`".into()));
-                };
-                if o.radius_mm.is_some() {
-                    return Err(err(o.shape.span(), "a polygon takes no `radius_mm`".into()));
-                }
-                let refuse = |msg: String| err(vs.span(), format!("`vertices_mm`: {msg}"));
-                let count = vs.get_ref().len();
-                if count > MAX_POLYGON_VERTICES {
-                    return Err(refuse(format!(
-                        "{count} vertices, at most {MAX_POLYGON_VERTICES} allowed"
-                    )));
-                }
-                for (i, v) in vs.get_ref().iter().enumerate() {
-                    if !(v[0].is_finite() && v[1].is_finite()) {
-                        return Err(refuse(format!("vertex {} is not a finite number", i + 1)));
-                    }
-                    if v[0].abs() > ARENA_HALF_SIZE_MM || v[1].abs() > ARENA_HALF_SIZE_MM {
-                        return Err(refuse(format!(
-                            "vertex {} ({}, {}) mm lies beyond the arena's +-{ARENA_HALF_SIZE_MM} mm",
-                            i + 1,
-                            v[0],
-                            v[1]
-                        )));
-                    }
-                }
-                let points = vs
-                    .get_ref()
-                    .iter()
-                    .map(|p| DVec2::new(p[0], p[1]) * 1e-3)
-                    .collect();
-                let poly = Polygon::new(points).map_err(|e| {
-                    refuse(match e {
-                        PolygonError::NotFinite(i) => format!("vertex {i} is not a finite number"),
-                        other => other.to_string(),
-                    })
-                })?;
-                let poly = poly.centred();
-                let radius_mm = poly.radius() * 1e3;
-                let (lo, hi) = OBJECT_RADIUS_MM;
-                if !(lo..=hi).contains(&radius_mm) {
-                    return Err(refuse(format!(
-                        "the object reaches {radius_mm:.1} mm from its centroid; it must reach from {lo} to {hi} mm"
-                    )));
-                }
-                let area_mm2 = poly.area() * 1e6;
-                if area_mm2 < MIN_OBJECT_AREA_MM2 {
-                    return Err(refuse(format!(
-                        "the object's area is {area_mm2:.3} mm^2, at least {MIN_OBJECT_AREA_MM2} mm^2 needed"
-                    )));
-                }
-                ObjectShape::Polygon(poly)
-            }
-            "circle" => {
-                let Some(r) = &o.radius_mm else {
-                    return Err(err(o.shape.span(), "a circle needs `radius_mm`".into()));
-                };
-                if o.vertices_mm.is_some() {
-                    return Err(err(
-                        o.shape.span(),
-                        "a circle takes no `vertices_mm`".into(),
-                    ));
-                }
-                let (lo, hi) = OBJECT_RADIUS_MM;
-                positive_within(r, "radius_mm", lo, hi, "mm", &err)?;
-                ObjectShape::Circle {
-                    radius: *r.get_ref() * 1e-3,
-                }
-            }
-            other => {
-                return Err(err(
-                    o.shape.span(),
-                    format!("unknown shape `{other}`; expected `polygon` or `circle`"),
-                ));
-            }
-        };
-        positive_within(&o.mass_kg, "mass_kg", MASS_KG.0, MASS_KG.1, "kg", &err)?;
-        non_negative_within(&o.floor_friction, "floor_friction", MAX_FRICTION, "", &err)?;
-        non_negative_within(
-            &o.contact_friction,
-            "contact_friction",
-            MAX_FRICTION,
-            "",
-            &err,
-        )?;
-        let object = ObjectSpec {
-            shape,
-            mass: *o.mass_kg.get_ref(),
-            floor_friction: *o.floor_friction.get_ref(),
-            contact_friction: *o.contact_friction.get_ref(),
-            start: match &o.start {
-                Some(p) => pose(p, "start", &err)?,
-                None => Pose::default(),
-            },
-        };
-
+        let object = object_spec(&file.object, &err)?;
         let robot = match &file.robot {
             None => RobotSetup {
                 drive: RobotDrive::default(),
@@ -559,46 +460,9 @@ impl Scenario {
                 localization: Some(DEFAULT_LOCALIZATION),
                 ir_noise_scale: 1.0,
             },
-            Some(r) => RobotSetup {
-                drive: match &r.drive {
-                    None => RobotDrive::default(),
-                    Some(d) => match d.get_ref().as_str() {
-                        "kinematic" => RobotDrive::Kinematic,
-                        "finite-force" => RobotDrive::FiniteForce,
-                        other => {
-                            return Err(err(
-                                d.span(),
-                                format!(
-                                    "`drive` is `{other}`; expected \"kinematic\" or \"finite-force\""
-                                ),
-                            ));
-                        }
-                    },
-                },
-                start: match &r.start {
-                    Some(p) => pose(p, "start", &err)?,
-                    None => DEFAULT_ROBOT_START,
-                },
-                odometry_noise: match &r.odometry_noise {
-                    Some(v) => {
-                        *non_negative_within(v, "odometry_noise", MAX_ODOMETRY_NOISE, "", &err)?
-                    }
-                    None => DEFAULT_ODOMETRY_NOISE,
-                },
-                localization: match &r.localization {
-                    None => Some(DEFAULT_LOCALIZATION),
-                    Some(v) => localization(v, &err)?,
-                },
-                ir_noise_scale: match &r.ir_noise_scale {
-                    Some(v) => {
-                        *non_negative_within(v, "ir_noise_scale", MAX_IR_NOISE_SCALE, "", &err)?
-                    }
-                    None => 1.0,
-                },
-            },
+            Some(r) => robot_setup(r, &err)?,
         };
-
-        let task = match &file.task {
+        let mut task = match &file.task {
             None => TaskSpec {
                 kind: TaskKind::Learn,
                 goal: Pose::default(),
@@ -611,7 +475,6 @@ impl Scenario {
             },
             Some(t) => task(t, &err)?,
         };
-        let mut task = task;
         if task.path.is_empty() {
             // benchmarks.md section 2: the "predefined line on the floor" of a scenario
             // without `path_mm` is 600 mm straight along +x from the object's start. It is
@@ -620,21 +483,7 @@ impl Scenario {
             let s = object.start.position();
             task.path = vec![s, s + DVec2::new(0.6, 0.0)];
         }
-
-        let clearance_mm = start_clearance_mm(&object, &robot);
-        if clearance_mm < 0.0 {
-            let at = match (file.robot.as_ref().and_then(|r| r.start.as_ref()), &o.start) {
-                (Some(p), _) | (None, Some(p)) => p.span(),
-                (None, None) => o.shape.span(),
-            };
-            return Err(err(
-                at,
-                format!(
-                    "the robot starts overlapping the object: clearance {clearance_mm:.1} mm between the robot's body and the object's border, at least 0 mm needed"
-                ),
-            ));
-        }
-
+        check_start_clearance(&file, &object, &robot, &err)?;
         let world_changes = world_changes(&file.world_change, &err)?;
 
         Ok(Scenario {
@@ -649,6 +498,172 @@ impl Scenario {
 }
 
 type ErrFn<'a> = dyn Fn(std::ops::Range<usize>, String) -> ScenarioLoadError + 'a;
+
+/// The `[object]` table: its shape, its numbers within their bounds, its start.
+fn object_spec(o: &ObjectFile, err: &ErrFn) -> Result<ObjectSpec, ScenarioLoadError> {
+    let shape = match o.shape.get_ref().as_str() {
+        "polygon" => {
+            let Some(vs) = &o.vertices_mm else {
+                return Err(err(o.shape.span(), "a polygon needs `vertices_mm`".into()));
+            };
+            if o.radius_mm.is_some() {
+                return Err(err(o.shape.span(), "a polygon takes no `radius_mm`".into()));
+            }
+            ObjectShape::Polygon(polygon(vs, err)?)
+        }
+        "circle" => {
+            let Some(r) = &o.radius_mm else {
+                return Err(err(o.shape.span(), "a circle needs `radius_mm`".into()));
+            };
+            if o.vertices_mm.is_some() {
+                return Err(err(
+                    o.shape.span(),
+                    "a circle takes no `vertices_mm`".into(),
+                ));
+            }
+            let (lo, hi) = OBJECT_RADIUS_MM;
+            positive_within(r, "radius_mm", lo, hi, "mm", err)?;
+            ObjectShape::Circle {
+                radius: *r.get_ref() * 1e-3,
+            }
+        }
+        other => {
+            return Err(err(
+                o.shape.span(),
+                format!("unknown shape `{other}`; expected `polygon` or `circle`"),
+            ));
+        }
+    };
+    positive_within(&o.mass_kg, "mass_kg", MASS_KG.0, MASS_KG.1, "kg", err)?;
+    non_negative_within(&o.floor_friction, "floor_friction", MAX_FRICTION, "", err)?;
+    non_negative_within(
+        &o.contact_friction,
+        "contact_friction",
+        MAX_FRICTION,
+        "",
+        err,
+    )?;
+    Ok(ObjectSpec {
+        shape,
+        mass: *o.mass_kg.get_ref(),
+        floor_friction: *o.floor_friction.get_ref(),
+        contact_friction: *o.contact_friction.get_ref(),
+        start: match &o.start {
+            Some(p) => pose(p, "start", err)?,
+            None => Pose::default(),
+        },
+    })
+}
+
+/// A polygon's `vertices_mm`: few enough, finite, inside the arena, a simple polygon (moved
+/// to its centroid) of a size the simulator handles.
+fn polygon(vs: &Spanned<Vec<[f64; 2]>>, err: &ErrFn) -> Result<Polygon, ScenarioLoadError> {
+    let refuse = |msg: String| err(vs.span(), format!("`vertices_mm`: {msg}"));
+    let count = vs.get_ref().len();
+    if count > MAX_POLYGON_VERTICES {
+        return Err(refuse(format!(
+            "{count} vertices, at most {MAX_POLYGON_VERTICES} allowed"
+        )));
+    }
+    for (i, v) in vs.get_ref().iter().enumerate() {
+        if !(v[0].is_finite() && v[1].is_finite()) {
+            return Err(refuse(format!("vertex {} is not a finite number", i + 1)));
+        }
+        if v[0].abs() > ARENA_HALF_SIZE_MM || v[1].abs() > ARENA_HALF_SIZE_MM {
+            return Err(refuse(format!(
+                "vertex {} ({}, {}) mm lies beyond the arena's +-{ARENA_HALF_SIZE_MM} mm",
+                i + 1,
+                v[0],
+                v[1]
+            )));
+        }
+    }
+    let points = vs
+        .get_ref()
+        .iter()
+        .map(|p| DVec2::new(p[0], p[1]) * 1e-3)
+        .collect();
+    let poly = Polygon::new(points).map_err(|e| {
+        refuse(match e {
+            PolygonError::NotFinite(i) => format!("vertex {i} is not a finite number"),
+            other => other.to_string(),
+        })
+    })?;
+    let poly = poly.centred();
+    let radius_mm = poly.radius() * 1e3;
+    let (lo, hi) = OBJECT_RADIUS_MM;
+    if !(lo..=hi).contains(&radius_mm) {
+        return Err(refuse(format!(
+            "the object reaches {radius_mm:.1} mm from its centroid; it must reach from {lo} to {hi} mm"
+        )));
+    }
+    let area_mm2 = poly.area() * 1e6;
+    if area_mm2 < MIN_OBJECT_AREA_MM2 {
+        return Err(refuse(format!(
+            "the object's area is {area_mm2:.3} mm^2, at least {MIN_OBJECT_AREA_MM2} mm^2 needed"
+        )));
+    }
+    Ok(poly)
+}
+
+/// The `[robot]` table, its keys left out taking their defaults.
+fn robot_setup(r: &RobotFile, err: &ErrFn) -> Result<RobotSetup, ScenarioLoadError> {
+    Ok(RobotSetup {
+        drive: match &r.drive {
+            None => RobotDrive::default(),
+            Some(d) => match d.get_ref().as_str() {
+                "kinematic" => RobotDrive::Kinematic,
+                "finite-force" => RobotDrive::FiniteForce,
+                other => {
+                    return Err(err(
+                        d.span(),
+                        format!("`drive` is `{other}`; expected \"kinematic\" or \"finite-force\""),
+                    ));
+                }
+            },
+        },
+        start: match &r.start {
+            Some(p) => pose(p, "start", err)?,
+            None => DEFAULT_ROBOT_START,
+        },
+        odometry_noise: match &r.odometry_noise {
+            Some(v) => *non_negative_within(v, "odometry_noise", MAX_ODOMETRY_NOISE, "", err)?,
+            None => DEFAULT_ODOMETRY_NOISE,
+        },
+        localization: match &r.localization {
+            None => Some(DEFAULT_LOCALIZATION),
+            Some(v) => localization(v, err)?,
+        },
+        ir_noise_scale: match &r.ir_noise_scale {
+            Some(v) => *non_negative_within(v, "ir_noise_scale", MAX_IR_NOISE_SCALE, "", err)?,
+            None => 1.0,
+        },
+    })
+}
+
+/// Refuses a robot that starts overlapping the object, naming the start that places it.
+fn check_start_clearance(
+    file: &ScenarioFile,
+    object: &ObjectSpec,
+    robot: &RobotSetup,
+    err: &ErrFn,
+) -> Result<(), ScenarioLoadError> {
+    let clearance_mm = start_clearance_mm(object, robot);
+    if clearance_mm < 0.0 {
+        let o = &file.object;
+        let at = match (file.robot.as_ref().and_then(|r| r.start.as_ref()), &o.start) {
+            (Some(p), _) | (None, Some(p)) => p.span(),
+            (None, None) => o.shape.span(),
+        };
+        return Err(err(
+            at,
+            format!(
+                "the robot starts overlapping the object: clearance {clearance_mm:.1} mm between the robot's body and the object's border, at least 0 mm needed"
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// Bounds of the numbers of a scenario (the lower bounds of the ones that must be
 /// positive keep the physics away from dividing by almost nothing).
