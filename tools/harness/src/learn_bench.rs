@@ -631,6 +631,38 @@ struct BenchWorld {
 }
 
 impl BenchWorld {
+    /// A world of `sim` and `learner` before any push, the object at `object0`.
+    fn new(
+        name: &str,
+        robot: &RobotDescription,
+        sim: Sim,
+        learner: ProtocolLearner,
+        shape: ObjectShape,
+        object0: Pose,
+        cfg: &LearnBenchConfig,
+    ) -> Self {
+        BenchWorld {
+            name: name.to_owned(),
+            perception: ObjectTracker::new(robot, TrackerConfig::default()),
+            sim,
+            learner,
+            shape,
+            object0,
+            reports: Vec::new(),
+            sessions: 0,
+            watch_touch: false,
+            touch_obj: None,
+            aim_obj: None,
+            heading_obj: None,
+            trial_alpha: f64::NAN,
+            trials: Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha),
+            no_contact: 0,
+            circle_timeouts: 0,
+            shape_points: 0,
+            shape_circling_moved_object_mm: f64::NAN,
+        }
+    }
+
     /// The estimator's perception, fed the latest frame.
     fn perceive(&mut self) {
         let s = self.sim.sensors();
@@ -875,97 +907,184 @@ pub fn run_object(
     let object0 = scenario.object.start;
     let total = cfg.progress_total();
     let mut done = 0;
-    let mut tick = |stage: LearnStage, done: &mut usize| {
-        *done += 1;
-        progress(LearnProgress {
-            stage,
-            done: *done,
-            total,
-        });
+    let mut tick = |stage: LearnStage| {
+        done += 1;
+        progress(LearnProgress { stage, done, total });
     };
-    let mut world = BenchWorld {
-        name: name.to_owned(),
-        perception: ObjectTracker::new(&robot, TrackerConfig::default()),
-        sim,
-        learner,
-        shape: shape.clone(),
-        object0,
-        reports: Vec::new(),
-        sessions: 0,
-        watch_touch: false,
-        touch_obj: None,
-        aim_obj: None,
-        heading_obj: None,
-        trial_alpha: f64::NAN,
-        trials: Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha),
-        no_contact: 0,
-        circle_timeouts: 0,
-        shape_points: 0,
-        shape_circling_moved_object_mm: f64::NAN,
-    };
+    let mut world = BenchWorld::new(name, &robot, sim, learner, shape.clone(), object0, cfg);
     // The frame of the built world, as the estimator sees it.
     world.learner.observe(&view(&world.sim));
+
+    let (protocol, learning) = learn(&mut world, cfg, &robot, object0, &mut tick)?;
+    let session = learned_session(&world, name, &shape)?;
+    let trials = &learning.trials;
+    let pose = pose_errors(trials, order);
+    let (by_method, truth_learned) = gradients_by_method(name, cfg, trials)?;
+    let eval = evaluate(&mut world, &protocol, cfg, object0, &mut tick)?;
+
+    let radius = protocol.start_radius_m();
+    let predictor = PushPredictor::new(&session.gradient, radius);
+    let prediction = predict_all(&predictor, &eval.samples, order, keyed(cfg.contact_method));
+    let prediction_by_method = by_method
+        .iter()
+        .map(|(m, g)| {
+            let p = PushPredictor::with_shape(g, predictor.shape().clone(), radius);
+            (*m, predict_all(&p, &eval.samples, order, keyed(*m)))
+        })
+        .collect();
+    let prediction_truth_learned = predict_all(
+        &PushPredictor::with_shape(&truth_learned, predictor.shape().clone(), radius),
+        &eval.samples,
+        order,
+        |e| e.true_aim.map(|(c, heading)| PushKey::at(c, heading)),
+    );
+    let rotation_error_by_alpha_gap_deg =
+        rotation_error_by_alpha_gap(&predictor, &eval.samples, cfg, order);
+
+    Ok(ObjectReport {
+        name: name.to_owned(),
+        symmetry_order: order,
+        alphas_deg: cfg.alphas_deg.clone(),
+        push_duration_s: cfg.push.push_duration,
+        shape_points: learning.shape_points,
+        learned_symmetry_order: session.symmetry_order,
+        learned_border_radius_mm: session.border_radius_mm,
+        shape_circling_moved_object_mm: learning.shape_circling_moved_object_mm,
+        trials: cfg.alphas_deg.len() * cfg.trials_per_alpha,
+        learned: session.learned,
+        no_contact: learning.no_contact,
+        rejected: session.rejected.saturating_sub(learning.no_contact),
+        circle_timeouts: learning.circle_timeouts,
+        max_rotation_deg: max_rotations(cfg, &session.gradient, trials),
+        pose_position_mm: pose.position_mm,
+        pose_orientation_deg: pose.orientation_deg,
+        wrong_branch: pose.wrong_branch,
+        learned_rotation_error_deg: pose.rotation_deg,
+        contact_error_mm: contact_errors(trials),
+        prediction,
+        eval_attempts: eval.attempts,
+        prediction_by_method,
+        prediction_truth_learned,
+        rotation_error_by_alpha_gap_deg,
+        initial_shape: session.initial_shape,
+        final_shape: session.final_shape,
+        learning_sim_time_s: learning.sim_time_s,
+        learning_wall_s: learning.wall_s,
+        eval_sim_time_s: eval.sim_time_s,
+        eval_wall_s: eval.wall_s,
+        gradient: session.gradient,
+    })
+}
+
+/// What the learning phase left: its trials and counts, and how long it took.
+struct Learning {
+    trials: Vec<TrialOutcome>,
+    no_contact: usize,
+    circle_timeouts: usize,
+    shape_points: usize,
+    shape_circling_moved_object_mm: f64,
+    sim_time_s: f64,
+    wall_s: f64,
+}
+
+/// (a) The shape, then (b) the trials: the planner's protocol, run against `world`.
+/// Returns the protocol (its start circle is the learned border's) and what it left.
+fn learn(
+    world: &mut BenchWorld,
+    cfg: &LearnBenchConfig,
+    robot: &RobotDescription,
+    object0: Pose,
+    tick: &mut dyn FnMut(LearnStage),
+) -> Result<(LearnProtocol, Learning), LearnBenchError> {
+    let name = world.name.clone();
     let protocol_error = |e: LearnProtocolError<LearnBenchError>| match e {
         LearnProtocolError::World(e) => e,
         LearnProtocolError::ShapeApproach => LearnBenchError::ShapeApproach {
-            object: name.to_owned(),
+            object: name.clone(),
         },
         other => LearnBenchError::Protocol {
-            object: name.to_owned(),
+            object: name.clone(),
             reason: other.to_string(),
         },
     };
-
-    // (a) The shape, then (b) the trials: the planner's protocol.
     let wall = Instant::now();
     let t_start = world.sim.sim_time();
     // The shape circling starts outside anything the grid can hold; everything after it
     // starts from the border learned.
-    let mut protocol = LearnProtocol::new(cfg.protocol(), &robot, object0);
+    let mut protocol = LearnProtocol::new(cfg.protocol(), robot, object0);
     protocol
-        .run(&mut world, &mut |step| match step {
-            ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling, &mut done),
-            ProtocolStep::Trial { .. } => tick(LearnStage::Trials, &mut done),
+        .run(world, &mut |step| match step {
+            ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling),
+            ProtocolStep::Trial { .. } => tick(LearnStage::Trials),
             ProtocolStep::Again { .. } | ProtocolStep::Learned(_) => {}
         })
         .map_err(protocol_error)?;
-    let radius = protocol.start_radius_m();
-    let trials = std::mem::take(&mut world.trials);
-    let (no_contact, circle_timeouts, shape_points, shape_circling_moved_object_mm) = (
-        world.no_contact,
-        world.circle_timeouts,
-        world.shape_points,
-        world.shape_circling_moved_object_mm,
-    );
-    let learning_sim_time_s = world.sim.sim_time() - t_start;
-    let learning_wall_s = wall.elapsed().as_secs_f64();
+    let learning = Learning {
+        trials: std::mem::take(&mut world.trials),
+        no_contact: world.no_contact,
+        circle_timeouts: world.circle_timeouts,
+        shape_points: world.shape_points,
+        shape_circling_moved_object_mm: world.shape_circling_moved_object_mm,
+        sim_time_s: world.sim.sim_time() - t_start,
+        wall_s: wall.elapsed().as_secs_f64(),
+    };
+    Ok((protocol, learning))
+}
+
+/// What the learner's session made of the trials.
+struct SessionResults {
+    learned: usize,
+    rejected: usize,
+    symmetry_order: Option<u32>,
+    border_radius_mm: f64,
+    /// The matcher's S (the first circling) against the true border.
+    initial_shape: ShapeQuality,
+    /// The final combined S (with the approaches' points), which the AG file carries.
+    final_shape: ShapeQuality,
+    gradient: AffordanceGradient,
+}
+
+/// The learner's session after the learning phase, its learned S scored against the true
+/// `shape`.
+fn learned_session(
+    world: &BenchWorld,
+    name: &str,
+    shape: &ObjectShape,
+) -> Result<SessionResults, LearnBenchError> {
     let Some(session) = world.learner.session() else {
         return Err(LearnBenchError::Protocol {
             object: name.to_owned(),
             reason: "the learner gave its session away".into(),
         });
     };
-    let (learned, rejected) = (session.trials_learned(), session.trials_rejected());
-    let learned_symmetry_order = session.symmetry_order();
-    let learned_border_radius_mm = session.border_radius_m().unwrap_or(f64::NAN) * 1e3;
-
-    // The learned S against the true border: the matcher's (first circling) and the final
-    // combined S (with the approaches' points), which is what the AG file carries.
     let initial_shape = shape_quality(
-        &shape,
+        shape,
         session.matcher().map_or(&[][..], |m| m.border_points()),
     );
     let final_shape = match session.matcher().map(|m| {
         agp_affordance::ShapeMatcher::new(&session.gradient().combined_shape(), m.config().clone())
     }) {
-        Some(Ok(m)) => shape_quality(&shape, m.border_points()),
+        Some(Ok(m)) => shape_quality(shape, m.border_points()),
         _ => ShapeQuality::default(),
     };
+    Ok(SessionResults {
+        learned: session.trials_learned(),
+        rejected: session.trials_rejected(),
+        symmetry_order: session.symmetry_order(),
+        border_radius_mm: session.border_radius_m().unwrap_or(f64::NAN) * 1e3,
+        initial_shape,
+        final_shape,
+        gradient: session.gradient().clone(),
+    })
+}
 
-    // (i) Largest rotation per alpha, learned and true.
-    let gradient = session.gradient().clone();
-    let max_rotation_deg = cfg
-        .alphas_deg
+/// (i) Largest rotation per alpha: (alpha, learned, true), degrees.
+fn max_rotations(
+    cfg: &LearnBenchConfig,
+    gradient: &AffordanceGradient,
+    trials: &[TrialOutcome],
+) -> Vec<(f64, f64, f64)> {
+    cfg.alphas_deg
         .iter()
         .map(|&a| {
             let learned = gradient.max_rotation_deg(a).unwrap_or(f64::NAN);
@@ -976,9 +1095,20 @@ pub fn run_object(
                 .fold(0.0, f64::max);
             (a, learned, truth)
         })
-        .collect();
+        .collect()
+}
 
-    // (iii) Pose from one circling, and the learned rotations.
+/// (iii) How far the pose from one circling, and the learned rotation, were from the truth.
+struct PoseErrors {
+    position_mm: Spread,
+    /// None for a disc (no orientation).
+    orientation_deg: Option<Spread>,
+    /// Learned rotations more than a quarter of the symmetry period off.
+    wrong_branch: usize,
+    rotation_deg: Spread,
+}
+
+fn pose_errors(trials: &[TrialOutcome], order: u32) -> PoseErrors {
     let period = if order <= 1 {
         TAU
     } else {
@@ -986,7 +1116,7 @@ pub fn run_object(
     };
     let (mut pos_err, mut ori_err, mut rot_err) = (Vec::new(), Vec::new(), Vec::new());
     let mut wrong_branch = 0;
-    for t in &trials {
+    for t in trials {
         let Some(r) = &t.record else { continue };
         pos_err.push((r.object_after.position() - t.truth.after.position()).length() * 1e3);
         if order != 0 {
@@ -1001,9 +1131,17 @@ pub fn run_object(
             rot_err.push(e.to_degrees());
         }
     }
+    PoseErrors {
+        position_mm: Spread::of(&mut pos_err),
+        orientation_deg: (order != 0).then(|| Spread::of(&mut ori_err)),
+        wrong_branch,
+        rotation_deg: Spread::of(&mut rot_err),
+    }
+}
 
-    // Contact estimates against the truth.
-    let contact_error_mm = ContactMethod::ALL
+/// Each method's contact estimates against the true touch (or aim) point, mm.
+fn contact_errors(trials: &[TrialOutcome]) -> Vec<(ContactMethod, Spread)> {
+    ContactMethod::ALL
         .iter()
         .map(|&m| {
             let mut e: Vec<f64> = trials
@@ -1019,10 +1157,17 @@ pub fn run_object(
                 .collect();
             (m, Spread::of(&mut e))
         })
-        .collect();
+        .collect()
+}
 
-    // Gradients keyed by every method from the same trials, and one learned from the
-    // truth (true aim points and effects): what the representation can do with them.
+/// Gradients keyed by every method from the same trials, and one learned from the truth
+/// (true aim points and effects): what the representation can do with them.
+#[allow(clippy::type_complexity)]
+fn gradients_by_method(
+    name: &str,
+    cfg: &LearnBenchConfig,
+    trials: &[TrialOutcome],
+) -> Result<(Vec<(ContactMethod, AffordanceGradient)>, AffordanceGradient), LearnBenchError> {
     let new_learner = || {
         let mut lc = LearningConfig::default().learner;
         lc.alphas_deg = cfg.alphas_deg.clone();
@@ -1052,7 +1197,7 @@ pub fn run_object(
     }
     let truth_learned = {
         let mut learner = new_learner()?;
-        for t in &trials {
+        for t in trials {
             if let (Some(c), Some(heading_obj)) = (t.truth.aim_obj, t.truth.heading_obj) {
                 let outcome = PushOutcome {
                     contact_point_obj: c,
@@ -1065,25 +1210,43 @@ pub fn run_object(
         }
         learner.into_gradient()
     };
+    Ok((by_method, truth_learned))
+}
 
-    // (ii) Unseen pushes: random angle round the object, random alpha in [-15, 15]. A push
-    // that touches nothing (or whose contact the estimator cannot place) is tried again
-    // elsewhere, up to a bound, so an object the robot cannot push ends the run.
+/// The unseen pushes of the evaluation, and how long they took.
+struct Evaluation {
+    samples: Vec<EvalPush>,
+    /// Pushes tried, those that touched nothing included.
+    attempts: usize,
+    sim_time_s: f64,
+    wall_s: f64,
+}
+
+/// (ii) Unseen pushes: random angle round the object, random alpha in [-15, 15]. A push
+/// that touches nothing (or whose contact the estimator cannot place) is tried again
+/// elsewhere, up to a bound, so an object the robot cannot push ends the run.
+fn evaluate(
+    world: &mut BenchWorld,
+    protocol: &LearnProtocol,
+    cfg: &LearnBenchConfig,
+    object0: Pose,
+    tick: &mut dyn FnMut(LearnStage),
+) -> Result<Evaluation, LearnBenchError> {
     let wall = Instant::now();
     let t_eval = world.sim.sim_time();
     let mut rng = Rng::stream(cfg.seed, EVAL_RNG_STREAM);
     let mut samples: Vec<EvalPush> = Vec::with_capacity(cfg.eval_pushes);
     let max_attempts = cfg.eval_pushes.saturating_mul(4).saturating_add(20);
-    let mut eval_attempts = 0;
-    while samples.len() < cfg.eval_pushes && eval_attempts < max_attempts {
-        eval_attempts += 1;
+    let mut attempts = 0;
+    while samples.len() < cfg.eval_pushes && attempts < max_attempts {
+        attempts += 1;
         let phi = rng.range(0.0, TAU);
         let alpha = rng.range(-15.0, 15.0);
         // The protocol's approach and push, told to nobody: the learner is done.
         world.reset(object0, protocol.start_pose(phi, alpha))?;
         world.watch();
         let mut estimates = None;
-        let contact = protocol.approach_and_push(&mut world, |w| {
+        let contact = protocol.approach_and_push(world, |w| {
             estimates = w
                 .learner
                 .session()
@@ -1095,7 +1258,7 @@ pub fn run_object(
             continue;
         }
         // Let the object come to rest.
-        LearnProtocol::hold(&mut world, 0.1, 0.0)?;
+        LearnProtocol::hold(world, 0.1, 0.0)?;
         let after = world.sim.object_pose();
         let Some(contact) = estimates else { continue };
         samples.push(EvalPush {
@@ -1105,45 +1268,44 @@ pub fn run_object(
             displacement_obj: object0.to_local(after.position()),
             rotation_rad: wrap_angle(after.theta - object0.theta),
         });
-        tick(LearnStage::Evaluation, &mut done);
+        tick(LearnStage::Evaluation);
     }
-    let eval_sim_time_s = world.sim.sim_time() - t_eval;
-    let eval_wall_s = wall.elapsed().as_secs_f64();
-    // The estimator's contact and the robot's heading as it estimated it; a heading line
-    // that met no learned border (the disc grazed the object beside it) gives way to the
-    // body sweep's touch point.
-    let keyed = |m: ContactMethod| {
-        move |e: &EvalPush| {
-            let heading = DVec2::from_angle(e.contact.robot_obj.theta);
-            match (e.contact.get(m), m) {
-                (Some(c), _) => Some(PushKey::at(c, heading)),
-                (None, ContactMethod::HeadingLine) => e.contact.body_sweep.map(|c| PushKey {
-                    by_touch: true,
-                    ..PushKey::at(c, heading)
-                }),
-                (None, _) => None,
-            }
+    Ok(Evaluation {
+        samples,
+        attempts,
+        sim_time_s: world.sim.sim_time() - t_eval,
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}
+
+/// An unseen push's key by method `m`: the estimator's contact and the robot's heading as
+/// it estimated it; a heading line that met no learned border (the disc grazed the object
+/// beside it) gives way to the body sweep's touch point.
+fn keyed(m: ContactMethod) -> impl Fn(&EvalPush) -> Option<PushKey> {
+    move |e: &EvalPush| {
+        let heading = DVec2::from_angle(e.contact.robot_obj.theta);
+        match (e.contact.get(m), m) {
+            (Some(c), _) => Some(PushKey::at(c, heading)),
+            (None, ContactMethod::HeadingLine) => e.contact.body_sweep.map(|c| PushKey {
+                by_touch: true,
+                ..PushKey::at(c, heading)
+            }),
+            (None, _) => None,
         }
-    };
-    let predictor = PushPredictor::new(&gradient, radius);
-    let prediction = predict_all(&predictor, &samples, order, keyed(cfg.contact_method));
-    let prediction_by_method = by_method
-        .iter()
-        .map(|(m, g)| {
-            let p = PushPredictor::with_shape(g, predictor.shape().clone(), radius);
-            (*m, predict_all(&p, &samples, order, keyed(*m)))
-        })
-        .collect();
-    let prediction_truth_learned = predict_all(
-        &PushPredictor::with_shape(&truth_learned, predictor.shape().clone(), radius),
-        &samples,
-        order,
-        |e| e.true_aim.map(|(c, heading)| PushKey::at(c, heading)),
-    );
-    // Rotation error by how far the push's alpha lies from the nearest learned alpha.
+    }
+}
+
+/// Rotation error of the unseen pushes (keyed by the configured method), by how far each
+/// push's alpha lies from the nearest learned alpha: under 2.5, under 5, 5 deg or more.
+fn rotation_error_by_alpha_gap(
+    predictor: &PushPredictor<'_>,
+    samples: &[EvalPush],
+    cfg: &LearnBenchConfig,
+    order: u32,
+) -> [Spread; 3] {
     let mut bins: [Vec<f64>; 3] = Default::default();
     if order != 0 {
-        for e in &samples {
+        for e in samples {
             let Some(p) = keyed(cfg.contact_method)(e)
                 .and_then(|k| predictor.predict_push(k.point, e.alpha_deg, k.heading))
             else {
@@ -1161,41 +1323,7 @@ pub fn run_object(
             );
         }
     }
-    let rotation_error_by_alpha_gap_deg = bins.map(|mut b| Spread::of(&mut b));
-
-    Ok(ObjectReport {
-        name: name.to_owned(),
-        symmetry_order: order,
-        alphas_deg: cfg.alphas_deg.clone(),
-        push_duration_s: cfg.push.push_duration,
-        shape_points,
-        learned_symmetry_order,
-        learned_border_radius_mm,
-        shape_circling_moved_object_mm,
-        trials: cfg.alphas_deg.len() * cfg.trials_per_alpha,
-        learned,
-        no_contact,
-        rejected: rejected.saturating_sub(no_contact),
-        circle_timeouts,
-        max_rotation_deg,
-        pose_position_mm: Spread::of(&mut pos_err),
-        pose_orientation_deg: (order != 0).then(|| Spread::of(&mut ori_err)),
-        wrong_branch,
-        learned_rotation_error_deg: Spread::of(&mut rot_err),
-        contact_error_mm,
-        prediction,
-        eval_attempts,
-        prediction_by_method,
-        prediction_truth_learned,
-        rotation_error_by_alpha_gap_deg,
-        initial_shape,
-        final_shape,
-        learning_sim_time_s,
-        learning_wall_s,
-        eval_sim_time_s,
-        eval_wall_s,
-        gradient,
-    })
+    bins.map(|mut b| Spread::of(&mut b))
 }
 
 /// One unseen push of the evaluation.

@@ -12,7 +12,9 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use agp_affordance::{GaussianSmoother, MatchMethod, ShapeMatcher, ShapeMatcherConfig};
+use agp_affordance::{
+    AffordanceGradient, GaussianSmoother, MatchMethod, ShapeMatcher, ShapeMatcherConfig,
+};
 use agp_harness::math::{
     PaperReference, Timing, circling_points, learn_from_sim, measure, orientation_disagreement,
     perimeter, polygon_of, push_cost_disagreement, random_goals, random_grid, reference_plan,
@@ -77,24 +79,72 @@ struct Row {
     target_us: Option<f64>,
 }
 
+/// How many calls each case warms up with and measures, for ours and for the reference.
+#[derive(Debug, Clone, Copy)]
+struct Calls {
+    warmup: usize,
+    calls: usize,
+    ref_warmup: usize,
+    ref_calls: usize,
+}
+
 fn main() -> Result<()> {
     alloc_count::enable();
     let args = Args::parse();
     if args.calls == 0 || args.ref_calls == 0 {
         bail!("--calls and --ref-calls must be at least 1");
     }
-    let warmup = (args.calls / 10).max(10);
-    let ref_warmup = (args.ref_calls / 10).max(2);
+    let n = Calls {
+        warmup: (args.calls / 10).max(10),
+        calls: args.calls,
+        ref_warmup: (args.ref_calls / 10).max(2),
+        ref_calls: args.ref_calls,
+    };
     let mut rows = Vec::new();
     let mut checks = Vec::new();
-    // Other work on the machine shows in the figures: say how much there was.
+    let (load, cores) = machine_load();
+    println!("load average (1, 5, 15 min) at start: {load} on {cores} cores");
+
+    bench_smoothing(&args, n, &mut rows, &mut checks);
+    let scenario = Scenario::builtin(&args.scenario)
+        .with_context(|| format!("no built-in scenario `{}`", args.scenario))?;
+    let ag = learned_ag(&scenario, args.starts_per_alpha)?;
+    bench_orientation(&args, n, &scenario, &ag, &mut rows, &mut checks)?;
+    bench_push_search(n, &scenario, &ag, &mut rows, &mut checks);
+
+    print_table(&rows);
+    let failed: Vec<_> = checks
+        .iter()
+        .filter(|c| c["ok"] != json!(true))
+        .map(|c| c["case"].clone())
+        .collect();
+    if let Some(path) = &args.json {
+        write_json(path, &load, cores, &checks, &rows)?;
+    }
+    if !failed.is_empty() {
+        bail!("ours and the reference disagree beyond tolerance: {failed:?}");
+    }
+    Ok(())
+}
+
+/// The load average (1, 5, 15 min) and the core count: other work on the machine shows in
+/// the figures, so they say how much there was.
+fn machine_load() -> (String, usize) {
     let load = std::fs::read_to_string("/proc/loadavg")
         .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
         .unwrap_or_else(|_| "unknown".to_owned());
     let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
-    println!("load average (1, 5, 15 min) at start: {load} on {cores} cores");
+    (load, cores)
+}
 
-    // 1. Smoothing.
+/// Case 1, Gaussian smoothing of a 128 x 128 grid: ours (separable, f32) against the direct
+/// 2-D convolution.
+fn bench_smoothing(
+    args: &Args,
+    n: Calls,
+    rows: &mut Vec<Row>,
+    checks: &mut Vec<serde_json::Value>,
+) {
     let mut smoother = GaussianSmoother::new(args.sigma_cells);
     let grids: Vec<_> = (0..4).map(|s| random_grid(100 + s)).collect();
     let mut worst = 0.0_f32;
@@ -111,12 +161,12 @@ fn main() -> Result<()> {
     checks.push(json!({"case": "smoothing", "max_abs_diff": worst, "tolerance": SMOOTHING_TOLERANCE, "ok": worst <= SMOOTHING_TOLERANCE}));
     let src = &grids[0];
     let mut dst = src.zeros_like();
-    let ours = measure(warmup, args.calls, allocations, || {
+    let ours = measure(n.warmup, n.calls, allocations, || {
         smoother.smooth(black_box(src), &mut dst);
         black_box(&dst);
     });
     let kernel = smoother.kernel().to_vec();
-    let reference = measure(ref_warmup, args.ref_calls, allocations, || {
+    let reference = measure(n.ref_warmup, n.ref_calls, allocations, || {
         reference_smooth(&kernel, black_box(src), &mut dst);
         black_box(&dst);
     });
@@ -127,13 +177,13 @@ fn main() -> Result<()> {
         reference_name: "direct 2-D",
         target_us: Some(25.0),
     });
+}
 
-    // The AG, learned against the physics.
-    let scenario = Scenario::builtin(&args.scenario)
-        .with_context(|| format!("no built-in scenario `{}`", args.scenario))?;
-    let polygon = polygon_of(&scenario)?;
+/// The AG of `scenario`'s object, learned against the physics with `starts_per_alpha`
+/// pushes per alpha.
+fn learned_ag(scenario: &Scenario, starts_per_alpha: usize) -> Result<AffordanceGradient> {
     let learn_start = Instant::now();
-    let ag = learn_from_sim(&scenario, args.starts_per_alpha)?;
+    let ag = learn_from_sim(scenario, starts_per_alpha)?;
     println!(
         "AG of `{}` learned from {} pushes against the physics in {:.1} s",
         scenario.name,
@@ -142,12 +192,23 @@ fn main() -> Result<()> {
             .sum::<u64>(),
         learn_start.elapsed().as_secs_f64()
     );
+    Ok(ag)
+}
 
-    // 2. Orientation match, Algorithm 3 at 1 deg.
-    let order = scenario.object.shape.symmetry_order();
+/// Case 2, the orientation match (Algorithm 3 at 1 deg) on points of circlings of the object
+/// at random poses: ours against the brute force.
+fn bench_orientation(
+    args: &Args,
+    n: Calls,
+    scenario: &Scenario,
+    ag: &AffordanceGradient,
+    rows: &mut Vec<Row>,
+    checks: &mut Vec<serde_json::Value>,
+) -> Result<()> {
+    let polygon = polygon_of(scenario)?;
     let config = ShapeMatcherConfig {
         method: MatchMethod::PaperOverlap,
-        symmetry_order: order,
+        symmetry_order: scenario.object.shape.symmetry_order(),
         paper_step_deg: 1.0,
         ..ShapeMatcherConfig::default()
     };
@@ -174,11 +235,11 @@ fn main() -> Result<()> {
     );
     checks.push(json!({"case": "orientation", "max_diff_deg": worst_deg, "tolerance_deg": ORIENTATION_TOLERANCE_DEG, "ok": worst_deg <= ORIENTATION_TOLERANCE_DEG}));
     let mut k = 0;
-    let ours = measure(warmup, args.calls, allocations, || {
+    let ours = measure(n.warmup, n.calls, allocations, || {
         k = (k + 1) % point_sets.len();
         black_box(matcher.match_points(black_box(&point_sets[k])).ok());
     });
-    let reference = measure(ref_warmup, args.ref_calls, allocations, || {
+    let reference = measure(n.ref_warmup, n.ref_calls, allocations, || {
         k = (k + 1) % point_sets.len();
         black_box(paper.orientation_rad(black_box(&point_sets[k])));
     });
@@ -189,11 +250,22 @@ fn main() -> Result<()> {
         reference_name: "brute force",
         target_us: Some(2000.0),
     });
+    Ok(())
+}
 
-    // 3. Push search.
+/// Case 3, the push search (Algorithm 5) towards random goals: ours against the plain
+/// search, with and without the contacts given.
+fn bench_push_search(
+    n: Calls,
+    scenario: &Scenario,
+    ag: &AffordanceGradient,
+    rows: &mut Vec<Row>,
+    checks: &mut Vec<serde_json::Value>,
+) {
     let robot = RobotDescription::epuck();
-    let settings = PushChoiceSettings::new(order, start_radius_m(&scenario, &robot));
-    let planner = PushPlanner::new(&ag, settings.clone());
+    let order = scenario.object.shape.symmetry_order();
+    let settings = PushChoiceSettings::new(order, start_radius_m(scenario, &robot));
+    let planner = PushPlanner::new(ag, settings.clone());
     let goals = random_goals(16, 11);
     let estimate = Pose2::new(0.0, 0.0, 0.0);
     let worst_cost = push_cost_disagreement(&planner, estimate, &goals);
@@ -207,13 +279,13 @@ fn main() -> Result<()> {
         PUSH_COST_TOLERANCE_M * 1e3
     );
     checks.push(json!({"case": "push search", "max_cost_diff_m": worst_cost, "tolerance_m": PUSH_COST_TOLERANCE_M, "ok": worst_cost <= PUSH_COST_TOLERANCE_M}));
-    let push_calls = (args.calls / 4).max(1);
+    let push_calls = (n.calls / 4).max(1);
     let mut k = 0;
-    let ours = measure(warmup / 4, push_calls, allocations, || {
+    let ours = measure(n.warmup / 4, push_calls, allocations, || {
         k = (k + 1) % goals.len();
         black_box(planner.plan(estimate, black_box(&goals[k])));
     });
-    let reference = measure(ref_warmup, args.ref_calls, allocations, || {
+    let reference = measure(n.ref_warmup, n.ref_calls, allocations, || {
         k = (k + 1) % goals.len();
         let goal = &goals[k];
         black_box(reference_plan(planner.predictor(), &settings, |p, f| {
@@ -221,7 +293,7 @@ fn main() -> Result<()> {
         }));
     });
     let contacts = planner.contacts().to_vec();
-    let reference_given = measure(ref_warmup, args.ref_calls, allocations, || {
+    let reference_given = measure(n.ref_warmup, n.ref_calls, allocations, || {
         k = (k + 1) % goals.len();
         let goal = &goals[k];
         black_box(reference_plan_over(
@@ -245,34 +317,31 @@ fn main() -> Result<()> {
         reference_name: "plain, contacts given",
         target_us: None,
     });
+}
 
-    print_table(&rows);
-    let failed: Vec<_> = checks
-        .iter()
-        .filter(|c| c["ok"] != json!(true))
-        .map(|c| c["case"].clone())
-        .collect();
-    if let Some(path) = &args.json {
-        let doc = json!({
-            "load_average_at_start": load,
-            "cores": cores,
-            "checks": checks,
-            "cases": rows.iter().map(|r| json!({
-                "case": r.case,
-                "reference": r.reference_name,
-                "ours": timing_json(&r.ours),
-                "reference_timing": timing_json(&r.reference),
-                "ratio_reference_over_ours": r.reference.median_us / r.ours.median_us,
-                "target_median_us": r.target_us,
-            })).collect::<Vec<_>>(),
-        });
-        std::fs::write(path, serde_json::to_string_pretty(&doc)?)
-            .with_context(|| format!("cannot write `{}`", path.display()))?;
-    }
-    if !failed.is_empty() {
-        bail!("ours and the reference disagree beyond tolerance: {failed:?}");
-    }
-    Ok(())
+/// Writes the figures as one JSON object to `path`.
+fn write_json(
+    path: &std::path::Path,
+    load: &str,
+    cores: usize,
+    checks: &[serde_json::Value],
+    rows: &[Row],
+) -> Result<()> {
+    let doc = json!({
+        "load_average_at_start": load,
+        "cores": cores,
+        "checks": checks,
+        "cases": rows.iter().map(|r| json!({
+            "case": r.case,
+            "reference": r.reference_name,
+            "ours": timing_json(&r.ours),
+            "reference_timing": timing_json(&r.reference),
+            "ratio_reference_over_ours": r.reference.median_us / r.ours.median_us,
+            "target_median_us": r.target_us,
+        })).collect::<Vec<_>>(),
+    });
+    std::fs::write(path, serde_json::to_string_pretty(&doc)?)
+        .with_context(|| format!("cannot write `{}`", path.display()))
 }
 
 fn timing_json(t: &Timing) -> serde_json::Value {
