@@ -325,19 +325,16 @@ fn out_loop(
             .wait()
             .map_err(zenoh_err)
     };
-    let welcome_of = |nonce: u64| ZBytes::from(Header::Welcome { nonce }.encode());
-    let mut served: Option<u64> = None;
-    let mut live = false;
-    // (outgoing index, bytes) of unlatched messages drained before the far end joined.
-    let mut pending: std::collections::VecDeque<(usize, Vec<u8>)> =
-        std::collections::VecDeque::new();
-    let mut active = shared.active_epoch.load(Ordering::Relaxed);
+    let mut state = OutState {
+        served: None,
+        live: false,
+        pending: std::collections::VecDeque::new(),
+        active: shared.active_epoch.load(Ordering::Relaxed),
+    };
     let mut last_activity = Instant::now();
-    let side = config.side;
-    let key = config.key;
     loop {
         if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
-            if live {
+            if state.live {
                 let _ = publisher
                     .put(Vec::<u8>::new())
                     .attachment(ZBytes::from(Header::Bye.encode()))
@@ -345,100 +342,11 @@ fn out_loop(
             }
             return Ok(());
         }
-        // A far end that just joined: the latched state first, then the live messages.
-        while let Ok(Some(hello)) = hellos.try_recv() {
-            let nonce = match hello.attachment().map(|a| a.to_bytes()) {
-                Some(text) => match wire::decode(&text)? {
-                    Header::Hello { nonce } => nonce,
-                    _ => continue,
-                },
-                None => continue,
-            };
-            if served == Some(nonce) {
-                continue;
-            }
-            for o in &outgoing {
-                o.cache.each(|bytes| {
-                    put(bytes, &o.header)?;
-                    shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
-                    Ok(())
-                })?;
-            }
-            // Then what was sent before it joined, in the order it was drained.
-            for (i, bytes) in pending.drain(..) {
-                let o = &outgoing[i];
-                put(&bytes, &o.header)?;
-                shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
-            }
-            put(&[], &welcome_of(nonce))?;
-            served = Some(nonce);
-            live = true;
-        }
+        greet_far_ends(&hellos, &outgoing, &mut state, shared, &put)?;
         if let Some(epochs) = &epochs {
-            while let Ok(Some(e)) = epochs.receive() {
-                active = e.epoch;
-            }
-            shared.active_epoch.store(active, Ordering::Relaxed);
+            take_active_epoch(epochs, &mut state.active, shared);
         }
-        let mut moved = 0;
-        for (index, o) in outgoing.iter_mut().enumerate() {
-            let mut failed = None;
-            let topic = o.topic;
-            let latched = topic.latch != Latch::None;
-            let cache = &mut o.cache;
-            let header = &o.header;
-            let slot = o.slot;
-            let drained = o.port.drain(&mut |bytes, auth| {
-                if failed.is_some() {
-                    return;
-                }
-                if let (Side::Planner, Some(Auth { epoch, token })) = (side, auth) {
-                    if epoch > active {
-                        // The supervisor made a newer epoch active before its planner sent.
-                        if let Some(epochs) = &epochs {
-                            while let Ok(Some(e)) = epochs.receive() {
-                                active = e.epoch;
-                            }
-                            shared.active_epoch.store(active, Ordering::Relaxed);
-                        }
-                    }
-                    if epoch != active {
-                        shared.stale.fetch_add(1, Ordering::Relaxed);
-                        return;
-                    }
-                    if key.is_some_and(|k| k.token(epoch) != token) {
-                        shared.refused.fetch_add(1, Ordering::Relaxed);
-                        return;
-                    }
-                }
-                cache.keep(bytes);
-                if live {
-                    match put(bytes, header) {
-                        Ok(()) => {
-                            shared.sent[slot].fetch_add(1, Ordering::Relaxed);
-                        }
-                        Err(e) => failed = Some(e),
-                    }
-                } else if !latched {
-                    if pending.len() >= PENDING_MAX {
-                        pending.pop_front();
-                    }
-                    pending.push_back((index, bytes.to_vec()));
-                }
-            });
-            match drained {
-                Ok(n) => moved += n,
-                Err(detail) => {
-                    return Err(BridgeError::Forward {
-                        topic: topic.name,
-                        detail,
-                    });
-                }
-            }
-            if let Some(e) = failed {
-                return Err(e);
-            }
-        }
+        let moved = forward_outgoing(&mut outgoing, &mut state, &epochs, config, shared, &put)?;
         if moved > 0 {
             last_activity = Instant::now();
             continue;
@@ -447,13 +355,164 @@ fn out_loop(
     }
 }
 
+/// What the sending loop keeps from one round to the next.
+struct OutState {
+    /// The nonce of the far end's hello last answered.
+    served: Option<u64>,
+    /// A far end joined: messages go out as they are drained.
+    live: bool,
+    /// (outgoing index, bytes) of unlatched messages drained before the far end joined.
+    pending: std::collections::VecDeque<(usize, Vec<u8>)>,
+    /// The epoch the supervisor made active, as last read.
+    active: u64,
+}
+
+/// Sends one message's bytes with its header over Zenoh.
+type Put<'a> = dyn Fn(&[u8], &ZBytes) -> Result<(), BridgeError> + 'a;
+
+/// The supervisor's active epochs, on the planner side.
+type EpochSubscriber =
+    iceoryx2::port::subscriber::Subscriber<AgpIpc, agp_shared_types::ActiveEpoch, ()>;
+
+/// Reads the newest active epoch into `active`, and shares it.
+fn take_active_epoch(epochs: &EpochSubscriber, active: &mut u64, shared: &Shared) {
+    while let Ok(Some(e)) = epochs.receive() {
+        *active = e.epoch;
+    }
+    shared.active_epoch.store(*active, Ordering::Relaxed);
+}
+
+/// Answers each far end that just joined (a hello with a nonce not answered yet): the
+/// latched state first, then what was drained before it joined, in that order, then a
+/// welcome naming its nonce. From then on messages go out live.
+fn greet_far_ends(
+    hellos: &HelloSubscriber,
+    outgoing: &[Outgoing],
+    state: &mut OutState,
+    shared: &Shared,
+    put: &Put<'_>,
+) -> Result<(), BridgeError> {
+    while let Ok(Some(hello)) = hellos.try_recv() {
+        let nonce = match hello.attachment().map(|a| a.to_bytes()) {
+            Some(text) => match wire::decode(&text)? {
+                Header::Hello { nonce } => nonce,
+                _ => continue,
+            },
+            None => continue,
+        };
+        if state.served == Some(nonce) {
+            continue;
+        }
+        for o in outgoing {
+            o.cache.each(|bytes| {
+                put(bytes, &o.header)?;
+                shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            })?;
+        }
+        // Then what was sent before it joined, in the order it was drained.
+        for (i, bytes) in state.pending.drain(..) {
+            let o = &outgoing[i];
+            put(&bytes, &o.header)?;
+            shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
+        }
+        put(&[], &ZBytes::from(Header::Welcome { nonce }.encode()))?;
+        state.served = Some(nonce);
+        state.live = true;
+    }
+    Ok(())
+}
+
+/// Drains every outgoing port once. Each message is kept in its topic's cache, then sent
+/// when a far end is live, or else held in `pending` (unless its topic is latched: the
+/// cache holds it). On the planner side a message of an epoch that is not the active one,
+/// or whose token the link's key refuses, is dropped and counted. Returns how many
+/// messages the ports gave.
+fn forward_outgoing(
+    outgoing: &mut [Outgoing],
+    state: &mut OutState,
+    epochs: &Option<EpochSubscriber>,
+    config: &BridgeConfig,
+    shared: &Shared,
+    put: &Put<'_>,
+) -> Result<usize, BridgeError> {
+    let (side, key) = (config.side, config.key);
+    let OutState {
+        live,
+        pending,
+        active,
+        ..
+    } = state;
+    let mut moved = 0;
+    for (index, o) in outgoing.iter_mut().enumerate() {
+        let mut failed = None;
+        let topic = o.topic;
+        let latched = topic.latch != Latch::None;
+        let cache = &mut o.cache;
+        let header = &o.header;
+        let slot = o.slot;
+        let drained = o.port.drain(&mut |bytes, auth| {
+            if failed.is_some() {
+                return;
+            }
+            if let (Side::Planner, Some(Auth { epoch, token })) = (side, auth) {
+                if epoch > *active {
+                    // The supervisor made a newer epoch active before its planner sent.
+                    if let Some(epochs) = epochs {
+                        take_active_epoch(epochs, active, shared);
+                    }
+                }
+                if epoch != *active {
+                    shared.stale.fetch_add(1, Ordering::Relaxed);
+                    return;
+                }
+                if key.is_some_and(|k| k.token(epoch) != token) {
+                    shared.refused.fetch_add(1, Ordering::Relaxed);
+                    return;
+                }
+            }
+            cache.keep(bytes);
+            if *live {
+                match put(bytes, header) {
+                    Ok(()) => {
+                        shared.sent[slot].fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(e) => failed = Some(e),
+                }
+            } else if !latched {
+                if pending.len() >= PENDING_MAX {
+                    pending.pop_front();
+                }
+                pending.push_back((index, bytes.to_vec()));
+            }
+        });
+        match drained {
+            Ok(n) => moved += n,
+            Err(detail) => {
+                return Err(BridgeError::Forward {
+                    topic: topic.name,
+                    detail,
+                });
+            }
+        }
+        if let Some(e) = failed {
+            return Err(e);
+        }
+    }
+    Ok(moved)
+}
+
+/// The far ends' hellos.
+type HelloSubscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
 type OutPorts = (
     iceoryx2::prelude::Node<AgpIpc>,
     Vec<Outgoing>,
     Vec<Listener<AgpIpc>>,
-    Option<iceoryx2::port::subscriber::Subscriber<AgpIpc, agp_shared_types::ActiveEpoch, ()>>,
+    Option<EpochSubscriber>,
     zenoh::pubsub::Publisher<'static>,
-    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    HelloSubscriber,
 );
 
 fn open_out(
