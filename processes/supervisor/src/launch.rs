@@ -558,79 +558,14 @@ impl LaunchConfig {
             faults: Vec::new(),
         };
 
-        let instance = match (&options.instance, &raw.instance) {
-            (Some(name), _) => {
-                if let Err(reason) = Instance::validate_name(name) {
-                    check.fault(LaunchFaultKind::BadInstanceName {
-                        name: name.clone(),
-                        from_cli: true,
-                        reason,
-                    });
-                }
-                name.clone()
-            }
-            (None, Some(name)) => {
-                if let Err(reason) = Instance::validate_name(name.as_ref()) {
-                    check.fault_at(
-                        name,
-                        LaunchFaultKind::BadInstanceName {
-                            name: name.as_ref().clone(),
-                            from_cli: false,
-                            reason,
-                        },
-                    );
-                }
-                name.as_ref().clone()
-            }
-            (None, None) => {
-                check.fault(LaunchFaultKind::NoInstance);
-                String::new()
-            }
-        };
+        let instance = resolve_instance(&mut check, options, &raw);
 
         let scenario = resolve_scenario(&mut check, &raw.scenario, &base);
         let results = base.join(raw.results.as_deref().unwrap_or("results"));
         let clock = resolve_clock(&mut check, raw.clock.as_ref());
 
-        if raw.process.is_empty() {
-            check.fault(LaunchFaultKind::NoProcess);
-        }
-        if let Some(extra) = raw.process.get(MAX_PROCESSES) {
-            check.fault_at(
-                extra,
-                LaunchFaultKind::OutOfBounds {
-                    key: "process",
-                    limit: format!("at most {MAX_PROCESSES} entries (MAX_PROCESSES)"),
-                    value: format!("{} entries", raw.process.len()),
-                },
-            );
-        }
-        let mut processes = Vec::with_capacity(raw.process.len());
-        let mut first_lines: BTreeMap<String, usize> = BTreeMap::new();
-        for entry in &raw.process {
-            let p = entry.as_ref();
-            let name = p.name.as_ref();
-            if name.is_empty()
-                || !name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-            {
-                check.fault_at(&p.name, LaunchFaultKind::BadProcessName(name.clone()));
-            }
-            let line = check.line_of(&p.name.span());
-            if let Some(&first_line) = first_lines.get(name) {
-                check.fault_at(
-                    &p.name,
-                    LaunchFaultKind::DuplicateProcess {
-                        name: name.clone(),
-                        first_line,
-                    },
-                );
-            } else {
-                first_lines.insert(name.clone(), line);
-            }
-            processes.push(resolve_process(&mut check, p, &base, &options.exe_dir));
-        }
+        let (mut processes, first_lines) =
+            resolve_processes(&mut check, &raw, &base, &options.exe_dir);
 
         if let Some(view) = &raw.view
             && let Some(p) = view_process(&mut check, view, &instance, &options.exe_dir)
@@ -879,6 +814,92 @@ fn view_process(
     })
 }
 
+/// The instance's name: `--instance` over the file's `instance`, checked; a fault when
+/// neither names one.
+fn resolve_instance(check: &mut Checker<'_>, options: &LaunchOptions, raw: &RawLaunch) -> String {
+    match (&options.instance, &raw.instance) {
+        (Some(name), _) => {
+            if let Err(reason) = Instance::validate_name(name) {
+                check.fault(LaunchFaultKind::BadInstanceName {
+                    name: name.clone(),
+                    from_cli: true,
+                    reason,
+                });
+            }
+            name.clone()
+        }
+        (None, Some(name)) => {
+            if let Err(reason) = Instance::validate_name(name.as_ref()) {
+                check.fault_at(
+                    name,
+                    LaunchFaultKind::BadInstanceName {
+                        name: name.as_ref().clone(),
+                        from_cli: false,
+                        reason,
+                    },
+                );
+            }
+            name.as_ref().clone()
+        }
+        (None, None) => {
+            check.fault(LaunchFaultKind::NoInstance);
+            String::new()
+        }
+    }
+}
+
+/// The `[[process]]` entries, each resolved, with the line each name first appears on: at
+/// least one entry, at most MAX_PROCESSES, names well formed and each once.
+fn resolve_processes(
+    check: &mut Checker<'_>,
+    raw: &RawLaunch,
+    base: &Path,
+    exe_dir: &Path,
+) -> (Vec<ProcessConfig>, BTreeMap<String, usize>) {
+    if raw.process.is_empty() {
+        check.fault(LaunchFaultKind::NoProcess);
+    }
+    if let Some(extra) = raw.process.get(MAX_PROCESSES) {
+        check.fault_at(
+            extra,
+            LaunchFaultKind::OutOfBounds {
+                key: "process",
+                limit: format!("at most {MAX_PROCESSES} entries (MAX_PROCESSES)"),
+                value: format!("{} entries", raw.process.len()),
+            },
+        );
+    }
+    let mut processes = Vec::with_capacity(raw.process.len());
+    let mut first_lines: BTreeMap<String, usize> = BTreeMap::new();
+    for entry in &raw.process {
+        let p = entry.as_ref();
+        let name = p.name.as_ref();
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            check.fault_at(&p.name, LaunchFaultKind::BadProcessName(name.clone()));
+        }
+        let line = check.line_of(&p.name.span());
+        if let Some(&first_line) = first_lines.get(name) {
+            check.fault_at(
+                &p.name,
+                LaunchFaultKind::DuplicateProcess {
+                    name: name.clone(),
+                    first_line,
+                },
+            );
+        } else {
+            first_lines.insert(name.clone(), line);
+        }
+        processes.push(resolve_process(check, p, base, exe_dir));
+    }
+    (processes, first_lines)
+}
+
+/// One `[[process]]` entry, checked: its executable (or the `agp bridge` of a `remote`),
+/// environment, restart policy and the bounds of its arguments.
 fn resolve_process(
     check: &mut Checker<'_>,
     p: &RawProcess,
@@ -886,11 +907,44 @@ fn resolve_process(
     exe_dir: &Path,
 ) -> ProcessConfig {
     let name = p.name.as_ref().clone();
-    let (exec, remote_args) = match (&p.exec, &p.remote) {
+    let (exec, remote_args) = resolve_exec(check, p, &name, base, exe_dir);
+    let env = resolve_env(check, p, &name);
+    let restart = p
+        .restart
+        .as_ref()
+        .map_or_else(RestartConfig::default, |raw| resolve_restart(check, raw));
+    if let Some(ms) = &p.stop_grace_ms {
+        check_delay(check, ms, "stop_grace_ms");
+    }
+    let args = checked_args(check, p);
+    ProcessConfig {
+        line: check.line_of(&p.name.span()),
+        name,
+        exec,
+        args: remote_args.unwrap_or_else(|| args.to_vec()),
+        env,
+        restart,
+        ends_run: p.ends_run,
+        stop_grace: p
+            .stop_grace_ms
+            .as_ref()
+            .map_or(DEFAULT_STOP_GRACE, |ms| Duration::from_millis(*ms.as_ref())),
+    }
+}
+
+/// What a process runs: its `exec` (a bare name is a binary of the workspace, next to
+/// `agp`; anything with a slash is a path from the launch file's folder), or for a `remote`
+/// process `agp` with the `bridge` arguments, returned beside it.
+fn resolve_exec(
+    check: &mut Checker<'_>,
+    p: &RawProcess,
+    name: &str,
+    base: &Path,
+    exe_dir: &Path,
+) -> (PathBuf, Option<Vec<String>>) {
+    match (&p.exec, &p.remote) {
         (Some(raw_exec), None) => {
             let exec_str = raw_exec.as_ref();
-            // A bare name is a binary of the workspace, next to `agp`; anything with a slash
-            // is a path.
             let exec = if exec_str.contains('/') {
                 base.join(exec_str)
             } else {
@@ -900,7 +954,7 @@ fn resolve_process(
                 check.fault_at(
                     raw_exec,
                     LaunchFaultKind::MissingExecutable {
-                        process: name.clone(),
+                        process: name.to_owned(),
                         exec: exec_str.clone(),
                         looked_at: exec.clone(),
                     },
@@ -914,7 +968,7 @@ fn resolve_process(
                 check.fault_at(
                     remote,
                     LaunchFaultKind::MissingExecutable {
-                        process: name.clone(),
+                        process: name.to_owned(),
                         exec: "agp".to_owned(),
                         looked_at: exec.clone(),
                     },
@@ -924,19 +978,19 @@ fn resolve_process(
                 check.fault_at(
                     args,
                     LaunchFaultKind::BadRemote {
-                        process: name.clone(),
+                        process: name.to_owned(),
                         reason: "a `remote` process runs `agp bridge` in its place: no `args`"
                             .to_owned(),
                     },
                 );
             }
-            (exec, Some(remote_bridge_args(check, &name, remote)))
+            (exec, Some(remote_bridge_args(check, name, remote)))
         }
         (Some(raw_exec), Some(_)) => {
             check.fault_at(
                 raw_exec,
                 LaunchFaultKind::BadRemote {
-                    process: name.clone(),
+                    process: name.to_owned(),
                     reason: "a `remote` process runs under another supervisor: no `exec`"
                         .to_owned(),
                 },
@@ -947,14 +1001,18 @@ fn resolve_process(
             check.fault_at(
                 &p.name,
                 LaunchFaultKind::BadRemote {
-                    process: name.clone(),
+                    process: name.to_owned(),
                     reason: "no `exec`: name an executable, or `remote = { ... }` for a process that runs under another supervisor".to_owned(),
                 },
             );
             (PathBuf::new(), None)
         }
-    };
+    }
+}
 
+/// The process's `env` table, less each entry refused (a context variable `agp up` sets
+/// itself, a malformed name or value, an unknown wait strategy), each refusal a fault.
+fn resolve_env(check: &mut Checker<'_>, p: &RawProcess, name: &str) -> BTreeMap<String, String> {
     let mut env = BTreeMap::new();
     for (key, value) in &p.env {
         let k = key.as_ref();
@@ -975,7 +1033,7 @@ fn resolve_process(
             Some(why) => check.fault_at(
                 key,
                 LaunchFaultKind::BadEnv {
-                    process: name.clone(),
+                    process: name.to_owned(),
                     key: k.clone(),
                     why,
                 },
@@ -985,38 +1043,44 @@ fn resolve_process(
             }
         }
     }
+    env
+}
 
+/// The process's `restart` table over the defaults: policy, restart count and back-off,
+/// each within its bounds.
+fn resolve_restart(check: &mut Checker<'_>, raw: &RawRestart) -> RestartConfig {
     let mut restart = RestartConfig::default();
-    if let Some(raw) = &p.restart {
-        if let Some(policy) = &raw.policy {
-            match policy.as_ref().as_str() {
-                "never" => restart.policy = RestartPolicy::Never,
-                "on-failure" => restart.policy = RestartPolicy::OnFailure,
-                "always" => restart.policy = RestartPolicy::Always,
-                other => check.fault_at(policy, LaunchFaultKind::UnknownPolicy(other.to_owned())),
-            }
-        }
-        if let Some(max) = &raw.max_restarts {
-            if *max.as_ref() > MAX_RESTARTS_LIMIT {
-                check.fault_at(
-                    max,
-                    LaunchFaultKind::OutOfBounds {
-                        key: "max_restarts",
-                        limit: format!("at most {MAX_RESTARTS_LIMIT} (MAX_RESTARTS_LIMIT)"),
-                        value: max.as_ref().to_string(),
-                    },
-                );
-            }
-            restart.max_restarts = *max.as_ref();
-        }
-        if let Some(ms) = &raw.backoff_ms {
-            check_delay(check, ms, "backoff_ms");
-            restart.backoff = Duration::from_millis(*ms.as_ref());
+    if let Some(policy) = &raw.policy {
+        match policy.as_ref().as_str() {
+            "never" => restart.policy = RestartPolicy::Never,
+            "on-failure" => restart.policy = RestartPolicy::OnFailure,
+            "always" => restart.policy = RestartPolicy::Always,
+            other => check.fault_at(policy, LaunchFaultKind::UnknownPolicy(other.to_owned())),
         }
     }
-    if let Some(ms) = &p.stop_grace_ms {
-        check_delay(check, ms, "stop_grace_ms");
+    if let Some(max) = &raw.max_restarts {
+        if *max.as_ref() > MAX_RESTARTS_LIMIT {
+            check.fault_at(
+                max,
+                LaunchFaultKind::OutOfBounds {
+                    key: "max_restarts",
+                    limit: format!("at most {MAX_RESTARTS_LIMIT} (MAX_RESTARTS_LIMIT)"),
+                    value: max.as_ref().to_string(),
+                },
+            );
+        }
+        restart.max_restarts = *max.as_ref();
     }
+    if let Some(ms) = &raw.backoff_ms {
+        check_delay(check, ms, "backoff_ms");
+        restart.backoff = Duration::from_millis(*ms.as_ref());
+    }
+    restart
+}
+
+/// The process's `args`, after a fault for too many, too long or holding a NUL, and one for
+/// too many `env` entries.
+fn checked_args<'p>(check: &mut Checker<'_>, p: &'p RawProcess) -> &'p [String] {
     let args: &[String] = p.args.as_ref().map_or(&[], |a| a.as_ref());
     let bad_arg = args.iter().enumerate().find_map(|(k, a)| {
         if a.contains('\0') {
@@ -1050,20 +1114,7 @@ fn resolve_process(
             },
         );
     }
-
-    ProcessConfig {
-        line: check.line_of(&p.name.span()),
-        name,
-        exec,
-        args: remote_args.unwrap_or_else(|| args.to_vec()),
-        env,
-        restart,
-        ends_run: p.ends_run,
-        stop_grace: p
-            .stop_grace_ms
-            .as_ref()
-            .map_or(DEFAULT_STOP_GRACE, |ms| Duration::from_millis(*ms.as_ref())),
-    }
+    args
 }
 
 /// The arguments of the `agp bridge` a `remote` process runs as (`--instance` comes from its
