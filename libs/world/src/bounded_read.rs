@@ -67,3 +67,55 @@ fn describe(kind: std::fs::FileType) -> &'static str {
         "a special file"
     }
 }
+
+/// `path` with `.` dropped and each `..` taken against the component before it, without
+/// touching the file system: `examples/python-planner/../../results` is `results`, and
+/// `../bad/../bad/typo.toml` is `../bad/typo.toml`. Leading `..` of a relative path stay,
+/// and `..` at the root is the root. This is how a path a user wrote is shown and joined;
+/// where a link makes the lexical and the real parent differ, the folders a launch file
+/// names relative to itself are still what its author meant.
+pub fn lexically_normal(path: &Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let mut out = std::path::PathBuf::new();
+    for part in path.components() {
+        match part {
+            Component::CurDir => {}
+            Component::ParentDir => match out.components().next_back() {
+                Some(Component::Normal(_)) => {
+                    out.pop();
+                }
+                Some(Component::RootDir | Component::Prefix(_)) => {}
+                _ => out.push(".."),
+            },
+            other => out.push(other),
+        }
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lexically_normal;
+    use std::path::Path;
+
+    #[test]
+    fn a_path_is_shown_without_dots_that_lead_back_where_it_was() {
+        let cases = [
+            ("examples/python-planner/../../results", "results"),
+            ("a/..", "."),
+            ("examples/python-planner/../../results/x.json", "results/x.json"),
+            ("../bad/../bad/typo.toml", "../bad/typo.toml"),
+            ("/a/./b/../c", "/a/c"),
+            ("/../x", "/x"),
+            ("../../x", "../../x"),
+            ("./", "."),
+            ("a/b/", "a/b"),
+        ];
+        for (given, shown) in cases {
+            assert_eq!(lexically_normal(Path::new(given)), Path::new(shown), "{given}");
+        }
+    }
+}

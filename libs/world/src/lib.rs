@@ -8,7 +8,7 @@ mod robot;
 mod scenario;
 
 pub use bounded_read::{
-    BoundedReadError, MAX_CONFIG_FILE_BYTES, read_regular_file, read_regular_text,
+    BoundedReadError, MAX_CONFIG_FILE_BYTES, lexically_normal, read_regular_file, read_regular_text,
 };
 pub use geometry::{
     Polygon, PolygonError, point_segment_distance, ray_segment, segments_intersect, signed_area,

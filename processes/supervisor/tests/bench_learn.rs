@@ -215,13 +215,18 @@ fn two_scenarios_naming_the_same_object_are_refused() {
     assert!(format!("{err:#}").contains("overwrite"), "{err:#}");
 }
 
+/// The square's and the circle's learning targets (the triangle's and the L's are held by
+/// the learning phase's own tests): the paper's protocol (60 trials per alpha in {0, +15,
+/// -15} deg), then 200 unseen pushes each, every target of `agp bench learn` met. About 7 s
+/// per object in the test build.
 #[test]
-#[ignore = "the full protocol on the four built-ins (several seconds per object in release, more in dev); run with --ignored --nocapture to see the tables"]
-fn the_benchmarks_protocol_runs_on_the_four_built_ins_and_reports_each() {
+fn the_square_and_the_circle_meet_every_learning_target_with_the_papers_protocol() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let json = dir.path().join("learn.json");
     let out = dir.path().join("ags");
     let code = run(&args(&[
+        "--scenario",
+        "square,circle",
         "--seed",
         "7",
         "--json",
@@ -232,17 +237,19 @@ fn the_benchmarks_protocol_runs_on_the_four_built_ins_and_reports_each() {
     .expect("the bench runs");
     assert_eq!(code, ExitCode::SUCCESS);
     let text = std::fs::read_to_string(&json).expect("the JSON file is written");
-    println!("{text}");
     let doc: Value = serde_json::from_str(&text).expect("valid JSON");
     assert_eq!(doc["protocol_as_specified"], true);
-    for object in ["triangle", "square", "lshape", "circle"] {
-        assert_eq!(
-            doc["objects"][object]["prediction"]["pushes"], 200,
-            "{object}"
-        );
+    for object in ["square", "circle"] {
+        let o = &doc["objects"][object];
+        assert_eq!(o["prediction"]["pushes"], 200, "{object}: {o}");
         assert!(out.join(format!("{object}.ag")).is_file(), "{object}.ag");
         assert!(out.join(format!("{object}.svg")).is_file(), "{object}.svg");
     }
+    assert_eq!(
+        doc["targets_missed"],
+        Value::Array(Vec::new()),
+        "every target met: {text}"
+    );
 }
 
 /// The `agp` binary, once `agp bench learn` is wired into main.rs.
