@@ -19,6 +19,7 @@ pub mod angle;
 mod control;
 mod payloads;
 mod service_names;
+mod skills;
 
 pub use control::{
     ActiveEpoch, ControlKind, ControlRequest, ControlResponse, GoalState, GoalStatus,
@@ -27,6 +28,7 @@ pub use control::{
 };
 pub use payloads::*;
 pub use service_names::ServiceNames;
+pub use skills::{PUSH_CHOICES, PUSH_REQUESTS, PushChoice, PushChoiceKind, PushRequest};
 
 /// CLOCK_MONOTONIC in nanoseconds: system-wide on Linux, so stamps from different
 /// processes compare.

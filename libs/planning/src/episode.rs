@@ -45,6 +45,7 @@ use crate::{
     PushPlanner, PushRoutine, PushSettings, TravelPhase, TravelRoutine, TravelSettings, World,
     WorldStepError, orbit_waypoints_into, symmetric_angle_error,
 };
+use crate::{ExternalPush, PushQuery, aim_point_at, learned_push_length_m};
 
 /// Which planner runs an episode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -789,7 +790,25 @@ impl<W: World> Episode<'_, '_, W> {
                 self.newer = Some(newer);
                 return Ok(EpisodeEnd::Done);
             }
-            let Some(order) = self.plan(&est) else {
+            let order = match self.ask_external(&est)? {
+                ExternalPush::Internal => self.plan(&est),
+                ExternalPush::Done => return Ok(EpisodeEnd::Done),
+                ExternalPush::GiveUp => return Ok(EpisodeEnd::Lost),
+                ExternalPush::Push {
+                    contact_deg,
+                    alpha_deg,
+                    length_m,
+                } => {
+                    let order = self.plan_external(&est, contact_deg, alpha_deg, length_m);
+                    if order.is_none() {
+                        self.trace(format_args!(
+                            "the push chosen ({contact_deg:.1} deg, alpha {alpha_deg:.1} deg) has no aim point or start"
+                        ));
+                    }
+                    order
+                }
+            };
+            let Some(order) = order else {
                 return Ok(EpisodeEnd::Lost);
             };
             if est.pushes_since == 0 {
@@ -1043,6 +1062,84 @@ impl<W: World> Episode<'_, '_, W> {
                 })
             }
         }
+    }
+
+    /// Asks the world for a push-level planner's choice (`agp-planner --skills`).
+    fn ask_external(&mut self, est: &Estimate) -> Result<ExternalPush, WorldStepError> {
+        let Brain::Gradient { start_radius, .. } = &self.brain else {
+            return Ok(ExternalPush::Internal);
+        };
+        let c = self.run.config;
+        let (target, _) = self.target(est);
+        let goal = match self.task {
+            Task::Place { goal } => *goal,
+            Task::Trajectory { .. } => Pose2::new(target.x, target.y, 0.0),
+        };
+        let query = PushQuery {
+            object: est.pose,
+            error_m: est.error_m,
+            error_rad: est.error_rad,
+            goal,
+            tolerance_m: c.tolerance_m,
+            tolerance_rad: c.tolerance_rad,
+            pushes: self.pushes,
+            pushes_since_estimate: est.pushes_since,
+            symmetry_order: self.order,
+            full_only: self.push_longer,
+            start_radius_m: *start_radius,
+        };
+        self.run.world.external_push(&query)
+    }
+
+    /// The push a push-level planner chose: at the aim point of `contact_deg` (object
+    /// frame, [`aim_point_at`]), deviation `alpha_deg`, `length_m` once in contact (the
+    /// learned push is the push routine's speed times its duration), from the start circle
+    /// ([`crate::approach_start`]). `None` when the ray meets no border or no start on the
+    /// circle sends the push through the aim point.
+    fn plan_external(
+        &self,
+        est: &Estimate,
+        contact_deg: f64,
+        alpha_deg: f64,
+        length_m: f64,
+    ) -> Option<PushOrder> {
+        let Brain::Gradient {
+            planner,
+            start_radius,
+            ..
+        } = &self.brain
+        else {
+            return None;
+        };
+        let c = self.run.config;
+        let contact = aim_point_at(planner.predictor().shape(), contact_deg.to_radians())?;
+        let learned = learned_push_length_m(c.push.push_speed, c.push.push_duration);
+        let f = (length_m / learned).clamp(0.05, 2.0);
+        let k = planner.settings().fraction_offset;
+        let s_scale = (f + k) / (1.0 + k);
+        let prediction = planner
+            .predictor()
+            .predict(contact, alpha_deg)
+            .map(|p| Prediction {
+                displacement: p.displacement * s_scale,
+                rotation_rad: p.rotation_rad * s_scale,
+                ..p
+            });
+        let (s, h) = crate::approach_start(contact, alpha_deg, *start_radius)?;
+        let rot = DVec2::from_angle(est.pose.theta);
+        let sw = est.position() + rot.rotate(s);
+        Some(PushOrder {
+            retry: self.push_longer,
+            start: Pose2::new(
+                sw.x,
+                sw.y,
+                agp_shared_types::angle::wrap_angle(h + est.pose.theta),
+            ),
+            duration: f * c.push.push_duration,
+            prediction,
+            plan: Some((contact, alpha_deg, s_scale)),
+            orbit: *start_radius,
+        })
     }
 
     /// Trajectory: a push through the centroid (alpha 0, the baseline's kind) whose

@@ -6,6 +6,7 @@ mod estimate_log;
 mod learning_protocol;
 mod push_choice;
 mod push_routine;
+mod push_service;
 mod travel;
 mod world;
 
@@ -25,7 +26,8 @@ pub use push_choice::{
     path_projection, symmetric_angle_error,
 };
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
+pub use push_service::{aim_point_at, learned_push_length_m};
 pub use travel::{
     TravelPhase, TravelRoutine, TravelSettings, orbit_waypoints, orbit_waypoints_into,
 };
-pub use world::{Senses, World, WorldStepError};
+pub use world::{ExternalPush, PushQuery, Senses, World, WorldStepError};

@@ -6,7 +6,7 @@
 //! [`World::object_truth`], which only the `oracle` and the evaluation call.
 
 use agp_affordance::AffordanceGradient;
-use agp_shared_types::{IR_SENSOR_COUNT, LearnEvent, ObjectEstimate};
+use agp_shared_types::{IR_SENSOR_COUNT, LearnEvent, ObjectEstimate, Pose2};
 use agp_world::Pose;
 
 /// One moment of the robot's senses: what a planner may read.
@@ -70,4 +70,49 @@ pub trait World {
     fn newer_gradient(&mut self) -> Option<AffordanceGradient> {
         None
     }
+    /// The push a push-level planner of another process chooses (`agp-planner --skills`),
+    /// asked between two pushes; [`ExternalPush::Internal`] (the default): the episode's
+    /// own planner chooses.
+    fn external_push(&mut self, _query: &PushQuery) -> Result<ExternalPush, WorldStepError> {
+        Ok(ExternalPush::Internal)
+    }
+}
+
+/// What an episode tells a push-level planner of another process before each push.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PushQuery {
+    /// The object's estimated pose (world frame) and how far it may be off (m, rad).
+    pub object: Pose2,
+    pub error_m: f64,
+    pub error_rad: f64,
+    /// Place: the goal pose; trajectory: the point to head for (theta 0).
+    pub goal: Pose2,
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+    pub pushes: u32,
+    pub pushes_since_estimate: u32,
+    /// The object's rotational symmetry learned from S (0: a disc).
+    pub symmetry_order: u32,
+    /// The last pushes left the object where it was: a full push is wanted.
+    pub full_only: bool,
+    /// Radius of the circle pushes start from, round the centroid (m).
+    pub start_radius_m: f64,
+}
+
+/// A push-level planner's answer to a [`PushQuery`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ExternalPush {
+    /// No such planner: the episode chooses.
+    Internal,
+    /// Push at the aim point of `contact_deg` (object frame; see
+    /// [`crate::aim_point_at`]), deviation `alpha_deg`, for `length_m` once in contact.
+    Push {
+        contact_deg: f64,
+        alpha_deg: f64,
+        length_m: f64,
+    },
+    /// The goal is reached.
+    Done,
+    /// No push helps.
+    GiveUp,
 }

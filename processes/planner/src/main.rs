@@ -2,6 +2,7 @@
 
 mod grid_link;
 mod learn_mode;
+mod push_service;
 mod ring;
 mod serve_mode;
 mod task_mode;
@@ -113,6 +114,12 @@ struct Args {
     /// Physics steps per second (paces the idle steps of `serve` on the lockstep clock).
     #[arg(long, env = "AGP_RATE_HZ", default_value_t = 640.0)]
     rate_hz: f64,
+    /// Place, serve: a push-level planner of another process chooses every push (the
+    /// `agp` Python package's `PushPlanner`, whose `agp.run` starts this planner so);
+    /// this planner carries the pushes out (travel, push, circling) and asks on
+    /// `agp/push_requests`, answered on `agp/push_choices`. Needs `--planner affordance`.
+    #[arg(long)]
+    skills: bool,
     /// Only check that these arguments fit the clock, then exit: 0 they do, 2 they do not
     /// (the reason on stderr). `agp up` runs it before it starts anything.
     #[arg(long)]
@@ -260,6 +267,14 @@ fn run() -> Result<()> {
         }
         bail!("{reason}, not `{}`", args.clock);
     }
+    if args.skills
+        && (args.planner != PlannerKind::Affordance
+            || !matches!(args.mode, Mode::Place | Mode::Serve))
+    {
+        bail!(
+            "`--skills` serves a push-level planner with `--mode place` or `--mode serve` and `--planner affordance`"
+        );
+    }
     if args.check {
         return Ok(());
     }
@@ -333,6 +348,7 @@ fn run() -> Result<()> {
                 gradient_timeout: Duration::from_secs(120),
                 ag_file,
                 trace: args.trace,
+                skills: args.skills,
             };
             if args.mode == Mode::Serve {
                 let paced = args.clock == "lockstep";

@@ -72,6 +72,7 @@ pub fn run(
                 ));
             };
             println!("planner: goal {}", latest.id);
+            session.set_goal_id(latest.id);
             let Some(result) = session.pursue(scenario, &task, under_way)? else {
                 return Ok(());
             };

@@ -22,7 +22,8 @@ use std::time::Duration;
 
 use agp_affordance::AffordanceGradient;
 use agp_planning::{
-    EpisodeConfig, EpisodeResult, PlannerKind, Senses, Task, World, WorldStepError, drive_episode,
+    EpisodeConfig, EpisodeResult, ExternalPush, PlannerKind, PushQuery, Senses, Task, World,
+    WorldStepError, drive_episode,
 };
 use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess};
 use agp_shared_types::{LearnEvent, MAX_PATH_POINTS, ObjectEstimate, Pose2, TaskKind, stage};
@@ -34,6 +35,7 @@ use iceoryx2::prelude::Node;
 
 use crate::SwapIn;
 use crate::grid_link::GridLink;
+use crate::push_service::{Pending, PushService};
 use crate::ring::{EstimatorLink, EstimatorRestarted, Ring};
 
 /// What `--mode place` and `--mode trajectory` were asked to do.
@@ -53,6 +55,8 @@ pub struct TaskSettings {
     pub ag_file: std::path::PathBuf,
     /// Print every estimate and push.
     pub trace: bool,
+    /// A push-level planner of another process chooses the pushes (`--skills`).
+    pub skills: bool,
 }
 
 /// The robot through the ring: one command per physics step, each frame acted on once the
@@ -73,6 +77,10 @@ struct PipelineWorld {
     /// The object's name and where its AG file is (for the grid link's messages).
     object: String,
     ag_file: std::path::PathBuf,
+    /// `--skills`: the push-level planner's service, and the live goal under way.
+    push_service: Option<PushService>,
+    goal_id: u64,
+    realtime: bool,
 }
 
 impl World for PipelineWorld {
@@ -121,6 +129,43 @@ impl World for PipelineWorld {
                 .map_err(|e| WorldStepError::Link(format!("{e:#}")))?;
         }
         Ok(())
+    }
+
+    fn external_push(&mut self, query: &PushQuery) -> Result<ExternalPush, WorldStepError> {
+        let link = |e: anyhow::Error| WorldStepError::Link(format!("{e:#}"));
+        let robot = self.ring.estimate().robot;
+        let t = self.ring.driver.frame().sim_time_s;
+        let goal_id = self.goal_id;
+        let Some(service) = self.push_service.as_mut() else {
+            return Ok(ExternalPush::Internal);
+        };
+        service.ask(query, goal_id, robot, t).map_err(link)?;
+        if !self.realtime {
+            // Lockstep: physics waits for the next command, and so does the run.
+            return service
+                .wait()
+                .map_err(link)?
+                .ok_or(WorldStepError::Shutdown);
+        }
+        // Realtime: the ring goes on with the wheels stopped until the answer is in.
+        let start = std::time::Instant::now();
+        loop {
+            let Some(service) = self.push_service.as_mut() else {
+                return Ok(ExternalPush::Internal);
+            };
+            if let Pending::Answer(a) = service.poll().map_err(link)? {
+                return Ok(a);
+            }
+            if agp_runtime::shutdown_requested() {
+                return Err(WorldStepError::Shutdown);
+            }
+            if start.elapsed() > crate::push_service::ANSWER_TIMEOUT {
+                return Err(WorldStepError::Link(
+                    "the push-level planner did not answer within 60 s".into(),
+                ));
+            }
+            self.step(0.0, 0.0)?;
+        }
     }
 
     fn object_truth(&self) -> Option<Pose> {
@@ -280,6 +325,13 @@ impl Session {
             served_seq,
             object: scenario.name.clone(),
             ag_file: settings.ag_file.clone(),
+            push_service: if settings.skills {
+                Some(PushService::open(instance, settings.epoch)?)
+            } else {
+                None
+            },
+            goal_id: 0,
+            realtime: settings.realtime,
         };
         if world.swap_in.is_some() {
             // A swapped-in planner answers the first frame of its epoch at once, wheels
@@ -304,6 +356,12 @@ impl Session {
     /// Whether a planner drove this world before this one came ([`under_way`]).
     pub fn under_way(&self, scenario: &ScenarioBrief, settings: &TaskSettings) -> bool {
         under_way(&self.world, settings, &scenario.robot.start)
+    }
+
+    /// The live session's goal under way (0: the scenario's task), for the push-level
+    /// planner's requests.
+    pub fn set_goal_id(&mut self, id: u64) {
+        self.world.goal_id = id;
     }
 
     /// The world, for a planner that waits between goals.
