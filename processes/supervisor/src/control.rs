@@ -289,3 +289,14 @@ fn clean_dead(instance: &Instance) -> Result<DownOutcome> {
     drop(lock);
     Ok(DownOutcome::Cleaned { removed })
 }
+
+/// `agp down --stale`: removes the instances of benchmarks that died without cleaning
+/// (`bench-<pid>-*` of this user, pid gone) and says how many.
+pub fn down_stale() -> Result<u8> {
+    let swept = agp_harness::stop::sweep_stale()?;
+    match swept.line() {
+        Some(line) => println!("agp: {line}"),
+        None => println!("agp: no leftover instance of a dead benchmark"),
+    }
+    Ok(0)
+}

@@ -204,6 +204,11 @@ struct DownArgs {
     /// Give up waiting for the stop after this many seconds.
     #[arg(long, default_value_t = 60)]
     timeout_s: u64,
+    /// Instead, remove the leftovers of benchmarks that died without cleaning (`kill -9`):
+    /// every instance `bench-<pid>-*` of this user whose pid no `agp` runs any more (what
+    /// every `agp bench` does when it starts).
+    #[arg(long, conflicts_with = "instance")]
+    stale: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -298,22 +303,22 @@ fn main() -> ExitCode {
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
         Cmd::Bench {
             what: BenchCmd::Learn(args),
-        } => bench_learn::run(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_learn::run(args)),
         Cmd::Bench {
             what: BenchCmd::Place(args),
-        } => bench_tasks::run_place(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_tasks::run_place(args)),
         Cmd::Bench {
             what: BenchCmd::Trajectory(args),
-        } => bench_trajectory::run_trajectory(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_trajectory::run_trajectory(args)),
         Cmd::Bench {
             what: BenchCmd::Paper(args),
-        } => bench_paper::run(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_paper::run(args)),
         Cmd::Bench {
             what: BenchCmd::Merge(args),
-        } => bench_merge::run(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_merge::run(args)),
         Cmd::Bench {
             what: BenchCmd::Adapt(args),
-        } => bench_adapt::run(args).map(|_| 0),
+        } => agp_harness::stop::guarded(|| bench_adapt::run(args)),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {
@@ -701,6 +706,9 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
 }
 
 fn down(args: &DownArgs) -> Result<u8> {
+    if args.stale {
+        return control::down_stale();
+    }
     let name = args.target.name()?;
     match control::down(&name, std::time::Duration::from_secs(args.timeout_s))? {
         control::DownOutcome::Stopped => println!("agp: instance `{name}` is down"),

@@ -22,6 +22,7 @@ use anyhow::{Context, Result, bail};
 use crate::bench_learn;
 use crate::pipeline_bench::PipelineBench;
 use crate::side_by_side::side_by_side;
+use crate::stop;
 use glam::DVec2;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::coord::Shift;
@@ -201,6 +202,133 @@ impl<'a> Runner<'a> {
     }
 }
 
+/// What the episode loop of `agp bench place` and `agp bench trajectory` needs to run its
+/// (seed, planner) pairs ([`run_episodes`]).
+pub(crate) struct EpisodePlan<'a> {
+    /// `place` or `trajectory`, for the progress lines.
+    pub benchmark: &'static str,
+    pub in_process: bool,
+    pub scenario_arg: &'a str,
+    pub scenario: &'a Scenario,
+    pub ag: Option<&'a Path>,
+    /// Whether several seeds run side by side (each pipeline's tag then holds its seed).
+    pub several_seeds: bool,
+    pub bar: &'a ProgressBar,
+}
+
+/// One (seed, planner) pair's episodes: every one of them, or those finished before a stop.
+pub(crate) struct PairRun {
+    pub results: Vec<EpisodeResult>,
+    /// Its wall time, s.
+    pub wall_s: f64,
+}
+
+/// The episode loop of the task benchmarks: each (seed, planner) of `work` gets a runner
+/// of its own (a freshly seeded pipeline, side by side on the cores) and runs the episodes
+/// `episodes(seed)` gives (a label for errors, the task, its config), in order.
+///
+/// A stop ([`stop::requested`]) is checked between episodes and ends the episode under
+/// way early (its planner is stopped); the pair then keeps the episodes it finished, its
+/// pipeline is stopped and its files removed, and the outcome is `Ok`: the caller writes
+/// the partial result. After each episode `progress` gets what every pair finished so far
+/// (in the order of `work`, with its wall time) and how many episodes that is: the
+/// benchmark's checkpoint. When the progress bar is hidden (stderr is not a terminal), each
+/// finished episode is said on one line of stderr instead.
+pub(crate) fn run_episodes(
+    plan: &EpisodePlan<'_>,
+    work: &[(u64, PlannerKind)],
+    episodes: impl Fn(u64) -> Vec<(String, Task, EpisodeConfig)> + Sync,
+    progress: impl Fn(&[(&[EpisodeResult], f64)], usize) + Sync,
+) -> Result<Vec<PairRun>> {
+    let done: std::sync::Mutex<Vec<(Vec<EpisodeResult>, f64)>> =
+        std::sync::Mutex::new(vec![(Vec::new(), 0.0); work.len()]);
+    let note_done = |index: usize, r: &EpisodeResult, wall_s: f64| {
+        let mut done = done
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(slot) = done.get_mut(index) {
+            slot.0.push(r.clone());
+            slot.1 = wall_s;
+        }
+        let view: Vec<(&[EpisodeResult], f64)> =
+            done.iter().map(|(r, w)| (r.as_slice(), *w)).collect();
+        let finished = done.iter().map(|(r, _)| r.len()).sum();
+        progress(&view, finished);
+    };
+    side_by_side(work, |&(seed, planner)| -> Result<PairRun> {
+        let index = work
+            .iter()
+            .position(|&w| w == (seed, planner))
+            .unwrap_or(0);
+        let started = Instant::now();
+        let tasks = episodes(seed);
+        let mut results = Vec::with_capacity(tasks.len());
+        if stop::requested() {
+            return Ok(PairRun {
+                results,
+                wall_s: 0.0,
+            });
+        }
+        let tag = instance_tag(planner, seed, plan.several_seeds);
+        let mut runner = match Runner::start_tagged(
+            plan.in_process,
+            plan.scenario_arg,
+            plan.scenario,
+            plan.ag,
+            planner,
+            seed,
+            &tag,
+        ) {
+            Ok(r) => r,
+            Err(_) if stop::requested() => {
+                return Ok(PairRun {
+                    results,
+                    wall_s: started.elapsed().as_secs_f64(),
+                });
+            }
+            Err(e) => return Err(e),
+        };
+        let outcome = (|| -> Result<()> {
+            for (k, (label, task, config)) in tasks.iter().enumerate() {
+                if stop::requested() {
+                    break;
+                }
+                match runner.episode(planner, task, config) {
+                    Ok(r) => {
+                        if plan.bar.is_hidden() {
+                            eprintln!(
+                                "bench {}: planner {planner}, seed {seed}: {label} done ({} of {}, {})",
+                                plan.benchmark,
+                                k + 1,
+                                tasks.len(),
+                                r.end.name()
+                            );
+                        }
+                        note_done(index, &r, started.elapsed().as_secs_f64());
+                        results.push(r);
+                        plan.bar.inc(1);
+                    }
+                    Err(_) if stop::requested() => break,
+                    Err(e) => {
+                        return Err(e.context(format!("planner `{planner}`, seed {seed}, {label}")));
+                    }
+                }
+            }
+            Ok(())
+        })();
+        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
+        let finished = runner.finish();
+        outcome?;
+        finished?;
+        Ok(PairRun {
+            results,
+            wall_s: started.elapsed().as_secs_f64(),
+        })
+    })
+    .into_iter()
+    .collect()
+}
+
 /// The instance tag of `planner`'s pipeline: three letters, and the seed when several
 /// seeds run side by side (two pipelines of one planner may then run at once).
 pub(crate) fn instance_tag(planner: PlannerKind, seed: u64, several_seeds: bool) -> String {
@@ -275,6 +403,8 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
         &scenario,
         &args.planners,
     )?;
+    // From here on the episode loops poll the stop flag.
+    let _checked = stop::checked();
     let note = physics_note(args.in_process);
     let all_seeds = args.seeds.all();
     let seeds = args.seeds.mine();
@@ -299,76 +429,104 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
         .collect();
     let bar = progress((args.episodes * work.len()) as u64);
     bar.set_prefix(prefix_of(&planners));
-    let tag = |planner: PlannerKind, seed: u64| instance_tag(planner, seed, seeds.len() > 1);
-    let runs = side_by_side(&work, |&(seed, planner)| {
-        let started = Instant::now();
-        let goals = place_goals(&scenario, args.episodes, seed);
-        let mut runner = Runner::start_tagged(
-            args.in_process,
-            &args.scenario,
-            &scenario,
-            ag.as_deref(),
-            planner,
-            seed,
-            &tag(planner, seed),
-        )?;
-        let mut runs = Vec::with_capacity(goals.len());
-        let episodes = (|| -> Result<()> {
-            for (k, goal) in goals.iter().enumerate() {
-                let config = EpisodeConfig {
-                    seed: seed.wrapping_add(k as u64),
-                    ..base.clone()
-                };
-                let r = runner
-                    .episode(planner, &Task::Place { goal: *goal }, &config)
-                    .with_context(|| format!("planner `{planner}`, seed {seed}, episode {k}"))?;
-                runs.push(r);
-                bar.inc(1);
-            }
-            Ok(())
-        })();
-        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
-        let finished = runner.finish();
-        episodes?;
-        finished?;
-        Ok((runs, started.elapsed().as_secs_f64()))
-    })
-    .into_iter()
-    .collect::<Result<Vec<_>>>()?;
-    bar.finish_and_clear();
-
+    let plan = EpisodePlan {
+        benchmark: "place",
+        in_process: args.in_process,
+        scenario_arg: &args.scenario,
+        scenario: &scenario,
+        ag: ag.as_deref(),
+        several_seeds: seeds.len() > 1,
+        bar: &bar,
+    };
     let tolerance = (base.tolerance_m * 1e3, base.tolerance_rad.to_degrees());
-    let mut docs = Vec::with_capacity(seeds.len());
-    let mut first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
-    let mut runs = runs.into_iter();
-    for &seed in &seeds {
-        let goals = place_goals(&scenario, args.episodes, seed);
-        let mut planners_json = Map::new();
-        let mut wall_s: f64 = 0.0;
-        for &planner in &planners {
-            let (results, planner_wall_s) = runs
-                .next()
-                .context("a (seed, planner) pair without its episodes")?;
-            wall_s = wall_s.max(planner_wall_s);
-            planners_json.insert(
-                planner.name().to_owned(),
-                planner_json(planner, seed, &results, &goals),
-            );
-            if first_seed_runs.len() < planners.len() && seed == seeds[0] {
-                first_seed_runs.insert(planner, results);
+    let planned = args.episodes * work.len();
+    // The one-seed documents of `runs` (the pairs of `work` in order, each with the
+    // episodes it finished).
+    let seed_docs = |runs: &[(&[EpisodeResult], f64)]| -> Vec<Value> {
+        seeds
+            .iter()
+            .zip(runs.chunks(planners.len()))
+            .map(|(&seed, pairs)| {
+                let goals = place_goals(&scenario, args.episodes, seed);
+                let mut planners_json = Map::new();
+                let mut wall_s: f64 = 0.0;
+                for (&planner, &(results, planner_wall_s)) in planners.iter().zip(pairs) {
+                    wall_s = wall_s.max(planner_wall_s);
+                    planners_json.insert(
+                        planner.name().to_owned(),
+                        planner_json(planner, seed, results, &goals),
+                    );
+                }
+                json!({
+                    "benchmark": "place",
+                    "scenario": scenario.name,
+                    "seed": seed,
+                    "physics": physics_label(args.in_process),
+                    "tolerance_mm": tolerance.0,
+                    "tolerance_deg": tolerance.1,
+                    "planners": planners_json,
+                    "wall_time_s": wall_s,
+                })
+            })
+            .collect()
+    };
+    // What finished, seeds of fewer episodes included: the checkpoints and a stop's JSON.
+    let partial_doc = |runs: &[(&[EpisodeResult], f64)]| -> Result<Value> {
+        let parts = run_parts(
+            &seed_docs(runs),
+            "place",
+            |_| Value::Null,
+            all_seeds.clone(),
+        )?;
+        let mut doc = assemble(&parts, args.seeds.shard);
+        doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
+        Ok(doc)
+    };
+    let runs = run_episodes(
+        &plan,
+        &work,
+        |seed| {
+            place_goals(&scenario, args.episodes, seed)
+                .into_iter()
+                .enumerate()
+                .map(|(k, goal)| {
+                    let config = EpisodeConfig {
+                        seed: seed.wrapping_add(k as u64),
+                        ..base.clone()
+                    };
+                    (format!("episode {k}"), Task::Place { goal }, config)
+                })
+                .collect()
+        },
+        |runs, finished| {
+            if let Ok(doc) = partial_doc(runs) {
+                stop::checkpoint(doc, args.json.as_deref(), "place", finished, planned);
             }
-        }
-        docs.push(json!({
-            "benchmark": "place",
-            "scenario": scenario.name,
-            "seed": seed,
-            "physics": physics_label(args.in_process),
-            "tolerance_mm": tolerance.0,
-            "tolerance_deg": tolerance.1,
-            "planners": planners_json,
-            "wall_time_s": wall_s,
-        }));
+        },
+    )?;
+    bar.finish_and_clear();
+    let runs: Vec<(&[EpisodeResult], f64)> = runs
+        .iter()
+        .map(|r| (r.results.as_slice(), r.wall_s))
+        .collect();
+    let finished: usize = runs.iter().map(|(r, _)| r.len()).sum();
+    if stop::requested() {
+        let doc = partial_doc(&runs)?;
+        return Err(stop::write_partial(
+            doc,
+            args.json.as_deref(),
+            "place",
+            finished,
+            planned,
+        ));
     }
+    stop::end_checkpoints(args.json.as_deref(), "place");
+    let docs = seed_docs(&runs);
+    let first_seed_runs: BTreeMap<PlannerKind, &[EpisodeResult]> = planners
+        .iter()
+        .zip(&runs)
+        .map(|(&p, &(r, _))| (p, r))
+        .collect();
     let parts = run_parts(&docs, "place", place_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();

@@ -12,14 +12,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::bench_tasks::{
-    Overlay, Panel, Runner, instance_tag, judged, physics_label, physics_note, plot_runs,
-    prefix_of, progress, resolve_ag, write_json,
+    EpisodePlan, Overlay, Panel, judged, physics_label, physics_note, plot_runs, prefix_of,
+    progress, resolve_ag, run_episodes, write_json,
 };
 use crate::seeds::{
     SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, mean_of, merge_parts,
     number_at, run_parts, seed_list, spread_at,
 };
-use crate::side_by_side::side_by_side;
+use crate::stop;
 use crate::task_goals::{NamedPath, heading_share, path_length};
 use crate::trajectory_error;
 use agp_planning::{EpisodeConfig, EpisodeResult, PlannerKind, Task};
@@ -352,6 +352,8 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         }
     }
     let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &PLANNERS)?;
+    // From here on the episode loops poll the stop flag.
+    let _checked = stop::checked();
     let note = physics_note(args.in_process);
     let all_seeds = args.seeds.all();
     let seeds = args.seeds.mine();
@@ -378,77 +380,105 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         .collect();
     let bar = progress((paths.len() * work.len()) as u64);
     bar.set_prefix(prefix_of(&PLANNERS));
-    let tag = |planner: PlannerKind, seed: u64| instance_tag(planner, seed, seeds.len() > 1);
-    let runs = side_by_side(&work, |&(seed, planner)| {
-        let started = Instant::now();
-        let mut runner = Runner::start_tagged(
-            args.in_process,
-            &args.scenario,
-            &scenario,
-            ag.as_deref(),
-            planner,
-            seed,
-            &tag(planner, seed),
-        )?;
-        let mut runs = Vec::with_capacity(paths.len());
-        let episodes = (|| -> Result<()> {
-            for (name, points) in &paths {
-                // Each path's episode draws the seed's noise afresh, the same for both
-                // planners.
-                let config = EpisodeConfig {
+    let plan = EpisodePlan {
+        benchmark: "trajectory",
+        in_process: args.in_process,
+        scenario_arg: &args.scenario,
+        scenario: &scenario,
+        ag: ag.as_deref(),
+        several_seeds: seeds.len() > 1,
+        bar: &bar,
+    };
+    let planned = paths.len() * work.len();
+    // The one-seed documents of `runs` (the pairs of `work` in order, each with the paths
+    // it finished).
+    let seed_docs = |runs: &[(&[EpisodeResult], f64)]| -> Vec<Value> {
+        seeds
+            .iter()
+            .zip(runs.chunks(PLANNERS.len()))
+            .map(|(&seed, pairs)| {
+                let mut per_path: Vec<Map<String, Value>> = vec![Map::new(); paths.len()];
+                let mut wall_s: f64 = 0.0;
+                for (&planner, &(results, planner_wall_s)) in PLANNERS.iter().zip(pairs) {
+                    wall_s = wall_s.max(planner_wall_s);
+                    for ((slot, (_, points)), r) in per_path.iter_mut().zip(&paths).zip(results) {
+                        slot.insert(planner.name().to_owned(), episode_json(points, r));
+                    }
+                }
+                one_seed_doc(
+                    &scenario.name,
                     seed,
-                    ..base.clone()
-                };
-                let task = Task::Trajectory {
-                    path: points.clone(),
+                    args.in_process,
                     keep_heading_rad,
-                };
-                let r = runner
-                    .episode(planner, &task, &config)
-                    .with_context(|| format!("planner `{planner}`, seed {seed}, path `{name}`"))?;
-                runs.push(r);
-                bar.inc(1);
+                    &paths,
+                    per_path,
+                    wall_s,
+                )
+            })
+            .collect()
+    };
+    // What finished, seeds of fewer paths included: the checkpoints and a stop's JSON.
+    let partial_doc = |runs: &[(&[EpisodeResult], f64)]| -> Result<Value> {
+        let parts = run_parts(
+            &seed_docs(runs),
+            "trajectory",
+            |_| Value::Null,
+            all_seeds.clone(),
+        )?;
+        let mut doc = assemble(&parts, args.seeds.shard);
+        doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
+        Ok(doc)
+    };
+    let runs = run_episodes(
+        &plan,
+        &work,
+        |seed| {
+            paths
+                .iter()
+                .map(|(name, points)| {
+                    // Each path's episode draws the seed's noise afresh, the same for both
+                    // planners.
+                    let config = EpisodeConfig {
+                        seed,
+                        ..base.clone()
+                    };
+                    let task = Task::Trajectory {
+                        path: points.clone(),
+                        keep_heading_rad,
+                    };
+                    (format!("path `{name}`"), task, config)
+                })
+                .collect()
+        },
+        |runs, finished| {
+            if let Ok(doc) = partial_doc(runs) {
+                stop::checkpoint(doc, args.json.as_deref(), "trajectory", finished, planned);
             }
-            Ok(())
-        })();
-        // Stopped and cleaned up whatever happened: a failed episode leaves no file.
-        let finished = runner.finish();
-        episodes?;
-        finished?;
-        Ok((runs, started.elapsed().as_secs_f64()))
-    })
-    .into_iter()
-    .collect::<Result<Vec<_>>>()?;
+        },
+    )?;
     bar.finish_and_clear();
-
-    let mut docs = Vec::with_capacity(seeds.len());
-    let mut first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = BTreeMap::new();
-    let mut runs = runs.into_iter();
-    for &seed in &seeds {
-        let mut per_path: Vec<Map<String, Value>> = vec![Map::new(); paths.len()];
-        let mut wall_s: f64 = 0.0;
-        for &planner in &PLANNERS {
-            let (results, planner_wall_s) = runs
-                .next()
-                .context("a (seed, planner) pair without its episodes")?;
-            wall_s = wall_s.max(planner_wall_s);
-            for ((slot, (_, points)), r) in per_path.iter_mut().zip(&paths).zip(&results) {
-                slot.insert(planner.name().to_owned(), episode_json(points, r));
-            }
-            if seed == seeds[0] {
-                first_seed_runs.insert(planner, results);
-            }
-        }
-        docs.push(one_seed_doc(
-            &scenario.name,
-            seed,
-            args.in_process,
-            keep_heading_rad,
-            &paths,
-            per_path,
-            wall_s,
+    let runs: Vec<(&[EpisodeResult], f64)> = runs
+        .iter()
+        .map(|r| (r.results.as_slice(), r.wall_s))
+        .collect();
+    let finished: usize = runs.iter().map(|(r, _)| r.len()).sum();
+    if stop::requested() {
+        let doc = partial_doc(&runs)?;
+        return Err(stop::write_partial(
+            doc,
+            args.json.as_deref(),
+            "trajectory",
+            finished,
+            planned,
         ));
     }
+    stop::end_checkpoints(args.json.as_deref(), "trajectory");
+    let docs = seed_docs(&runs);
+    let first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = PLANNERS
+        .iter()
+        .zip(&runs)
+        .map(|(&p, &(r, _))| (p, r.to_vec()))
+        .collect();
     let parts = run_parts(&docs, "trajectory", trajectory_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();

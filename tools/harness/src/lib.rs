@@ -6,7 +6,8 @@
 //! `agp probe` (`probe`), the learning benchmark against the physics library
 //! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
 //! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`), and
-//! `side_by_side`, which spreads independent benchmark work over the cores.
+//! `side_by_side`, which spreads independent benchmark work over the cores, and `stop`, how a
+//! bench stops on a signal (partial JSON, no file left) and sweeps what dead benches left.
 //!
 //! Ground truth is read here and in the physics library only (and by the `oracle`).
 
@@ -26,6 +27,7 @@ pub mod pipeline_bench;
 pub mod probe;
 pub mod seeds;
 pub mod side_by_side;
+pub mod stop;
 pub mod task_goals;
 
 pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode};
