@@ -1,21 +1,32 @@
-//! The Python planner of `examples/python-planner/` (the stock `iceoryx2` package from PyPI,
-//! no binding of ours) places the triangle: `agp up` runs the example's launch file, its
-//! physics and estimator agp's, its planner `planner.py`, and the judge's verdict is read
-//! from the results JSON. In lockstep, so the outcome does not depend on the machine's load.
+//! The Python planners of `examples/python-planner/`, on the `agp` Python package (python/)
+//! over the stock `iceoryx2` package: `agp up` runs physics and the estimator of agp and a
+//! planner script, and the judge's verdicts are read from the results JSON or `agp status`.
+//! In lockstep, so the outcome does not depend on the machine's load.
 //!
-//! The interpreter is `AGP_PYTHON`, by default the virtual environment `.ci/run` creates at
-//! the repository's root (`.venv-ci/bin/python`, with `iceoryx2==0.10.0`). Without it the
-//! test fails and says how to make it.
+//! - the push-level planner (`push_planner.py`: Algorithm 5's push choice on the gradient,
+//!   in Python; agp's skills travel, push and circle) places the triangle from the
+//!   shipped launch.toml;
+//! - in a live session it pursues a goal with the Rust planner swapped for it and back
+//!   mid-goal: every physics step applied once, the goal reached;
+//! - the wheel-level planner (`wheel_planner.py`) serves two goals one after another, each
+//!   end reported and judged, with a swap mid-goal: every physics step applied once.
+//!
+//! The interpreter is `AGP_PYTHON`, by default `.venv-ci/bin/python` as `tools/setup.sh`
+//! makes it (with the `agp` package installed from python/). Without it the tests fail and
+//! name the set-up command.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use agp_runtime::Instance;
-use agp_tests::{LaunchDir, assert_placed, count_instance_files, learned_ag, run_agp};
+use agp_tests::{
+    AgpUp, DownOnPanic, LaunchDir, StepLog, assert_every_step_applied_once, assert_placed,
+    count_instance_files, learned_ag, run_agp, status_json,
+};
+use serde_json::Value;
 
-/// Safety net of the run; the checks never depend on it (about 5 s on an idle machine,
-/// debug build).
+/// Safety net of each run; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(300);
 
 fn repo() -> PathBuf {
@@ -25,15 +36,35 @@ fn repo() -> PathBuf {
         .to_path_buf()
 }
 
-/// The Python interpreter with `iceoryx2` installed: `AGP_PYTHON`, else `.venv-ci/bin/python`.
-/// Panics in one line saying how to make it when it is missing or lacks the package.
+fn example(file: &str) -> PathBuf {
+    repo().join("examples/python-planner").join(file)
+}
+
+/// An executable in `dir` that runs `python` with its arguments: `agp swap` resolves the
+/// executable it is given (a venv's `bin/python` is a symlink to the base interpreter,
+/// which lacks the venv's packages), a script does not move.
+fn python_wrapper(dir: &Path, python: &Path) -> String {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join("python-venv");
+    std::fs::write(
+        &path,
+        format!("#!/bin/sh\nexec \"{}\" \"$@\"\n", python.display()),
+    )
+    .expect("write the wrapper");
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+        .expect("make the wrapper executable");
+    path.display().to_string()
+}
+
+/// `.venv-ci/bin/python` (or `AGP_PYTHON`) with the `agp` package; panics in one line
+/// naming the set-up command when it is missing.
 #[track_caller]
 fn python() -> PathBuf {
     let python = std::env::var_os("AGP_PYTHON")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo().join(".venv-ci/bin/python"));
     let ok = Command::new(&python)
-        .args(["-c", "import iceoryx2"])
+        .args(["-c", "import agp, iceoryx2, numpy"])
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -41,30 +72,27 @@ fn python() -> PathBuf {
         .is_ok_and(|s| s.success());
     assert!(
         ok,
-        "no Python with the `iceoryx2` package at {}: create it with `python3 -m venv .venv-ci && .venv-ci/bin/pip install iceoryx2==0.10.0` at the repository's root (as .ci/run does), or set AGP_PYTHON to such an interpreter",
+        "no Python with the `agp` package at {}: run `tools/setup.sh` at the repository's root (it makes .venv-ci and installs ./python), or set AGP_PYTHON to such an interpreter",
         python.display()
     );
     python
 }
 
-/// The example's launch file as shipped, but for where things are: its planner run by
-/// `python` (the shipped file runs `planner.py` by its shebang) and its results in the test's
-/// own folder.
-fn launch_text(python: &Path) -> String {
-    let dir = repo().join("examples/python-planner");
-    let shipped =
-        std::fs::read_to_string(dir.join("launch.toml")).expect("the example's launch.toml");
-    let mut planner_lines = 0;
-    let mut results_lines = 0;
+/// The example's launch.toml as shipped, but for where things are: its planner run by
+/// `python` (the shipped file runs `./push_planner.py` by its shebang) and its results in
+/// the test's own folder.
+fn shipped_launch(python: &Path) -> String {
+    let shipped = std::fs::read_to_string(example("launch.toml")).expect("the example's launch");
+    let (mut planner_lines, mut results_lines) = (0, 0);
     let text: Vec<String> = shipped
         .lines()
         .map(|line| {
-            if line.starts_with("exec = \"./planner.py\"") {
+            if line.starts_with("exec = \"./push_planner.py\"") {
                 planner_lines += 1;
                 format!(
                     "exec = \"{}\"\nargs = [\"{}\"]",
                     python.display(),
-                    dir.join("planner.py").display()
+                    example("push_planner.py").display()
                 )
             } else if line.starts_with("results = ") {
                 results_lines += 1;
@@ -77,50 +105,208 @@ fn launch_text(python: &Path) -> String {
     assert_eq!(
         (planner_lines, results_lines),
         (1, 1),
-        "the example's launch.toml changed: one `exec = \"./planner.py\"` and one `results` line expected"
+        "the example's launch.toml changed: one `exec = \"./push_planner.py\"` and one `results` line expected"
     );
     text.join("\n") + "\n"
 }
 
-#[test]
-fn the_python_planner_on_stock_iceoryx2_places_the_triangle() {
-    let name = "t-python-planner";
-    let python = python();
-    let dir = LaunchDir::new(&launch_text(&python));
-    std::fs::create_dir_all(dir.results()).expect("the results folder");
-    std::fs::copy(learned_ag("triangle"), dir.results().join("triangle.ag"))
-        .expect("the triangle's AG file into the results folder");
+/// A live session in lockstep: physics logging every applied step, the estimator serving
+/// `ag`, the planner `planner_exec` with `planner_args`.
+fn live_launch(instance: &str, ag: &Path, planner_exec: &str, planner_args: &[String]) -> String {
+    let args: Vec<String> = planner_args.iter().map(|a| format!("\"{a}\"")).collect();
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--step-log\", \"steps.log\"]\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"{planner_exec}\"\nargs = [{}]\n",
+        ag.display(),
+        args.join(", ")
+    )
+}
 
-    let start = Instant::now();
-    let launch = dir.launch();
-    let run = run_agp(
-        dir.path(),
-        &[
-            "up",
-            launch.to_str().expect("a UTF-8 path"),
-            "--instance",
-            name,
-        ],
-        TIMEOUT,
-    );
-    let wall = start.elapsed();
-    run.assert_success("`agp up`");
-    let done = run
-        .stdout
-        .lines()
-        .find(|l| l.starts_with("planner.py: done after"))
-        .unwrap_or_else(|| {
-            panic!(
-                "the Python planner did not say it was done:\n{}",
-                run.stdout
-            )
-        });
-    let (mm, deg) = assert_placed(&dir.results(), name, "triangle", &run.stdout);
+fn goals(status: &Value) -> Vec<Value> {
+    status["goals"].as_array().cloned().unwrap_or_default()
+}
+
+/// Polls `agp status` until `n` goals are done; returns them.
+#[track_caller]
+fn wait_goals_done(dir: &Path, name: &str, n: usize) -> Vec<Value> {
+    let deadline = std::time::Instant::now() + TIMEOUT;
+    loop {
+        let g = goals(&status_json(dir, name, TIMEOUT));
+        if g.iter().filter(|g| g["state"] == "done").count() >= n {
+            return g;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "fewer than {n} goals done: {g:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// `agp swap planner` with a new executable and arguments; panics unless it succeeded.
+#[track_caller]
+fn swap(dir: &Path, name: &str, exec: &str, args: &[String]) {
+    let mut words = vec![
+        "swap".to_owned(),
+        "planner".into(),
+        "--instance".into(),
+        name.into(),
+        "--exec".into(),
+        exec.into(),
+        "--".into(),
+    ];
+    words.extend_from_slice(args);
+    let w: Vec<&str> = words.iter().map(String::as_str).collect();
+    let run = run_agp(dir, &w, TIMEOUT);
+    run.assert_success("`agp swap planner`");
+}
+
+fn down(dir: &Path, name: &str, up: AgpUp) {
+    run_agp(dir, &["down", "--instance", name], TIMEOUT).assert_success("`agp down`");
+    let end = up.wait(TIMEOUT);
+    assert!(end.status.success(), "{}\n{}", end.stdout, end.stderr);
     assert_eq!(
         count_instance_files(name),
         0,
         "files of `{name}` remain: {:?}",
         Instance::new(name).expect("a valid name").files()
     );
-    println!("{done}\njudged: {mm:.1} mm, {deg:.1} deg; agp up took {wall:.1?}");
+}
+
+#[test]
+fn the_push_level_python_planner_places_the_triangle_from_the_shipped_launch_file() {
+    let name = "t-py-push-place";
+    let python = python();
+    let dir = LaunchDir::new(&shipped_launch(&python));
+    std::fs::create_dir_all(dir.results()).expect("the results folder");
+    std::fs::copy(learned_ag("triangle"), dir.results().join("triangle.ag"))
+        .expect("the triangle's AG file into the results folder");
+    let launch = dir.launch();
+    let launch = launch.to_str().expect("a UTF-8 path");
+    let run = run_agp(dir.path(), &["up", launch, "--instance", name], TIMEOUT);
+    run.assert_success("`agp up`");
+    assert!(
+        run.stdout.contains("push_planner.py: gradient with alphas"),
+        "{}",
+        run.stdout
+    );
+    let (mm, deg) = assert_placed(&dir.results(), name, "triangle", &run.stdout);
+    assert_eq!(count_instance_files(name), 0, "files of `{name}` remain");
+    let done = run
+        .stdout
+        .lines()
+        .find(|l| l.contains("done after"))
+        .unwrap_or_default();
+    println!("{done}\njudged: {mm:.1} mm, {deg:.1} deg");
+}
+
+#[test]
+fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_back_mid_goal() {
+    let name = "t-py-push-swap";
+    let python = python();
+    let wrappers = tempfile::tempdir().expect("a folder");
+    let python_s = python_wrapper(wrappers.path(), &python);
+    let ag = learned_ag("triangle");
+    let rust_args: Vec<String> = ["--mode", "serve", "--planner", "affordance"]
+        .map(String::from)
+        .to_vec();
+    let py_args = vec![
+        example("push_planner.py").display().to_string(),
+        "--serve".to_owned(),
+    ];
+    let dir = LaunchDir::new(&live_launch(name, &ag, "agp-planner", &rust_args));
+    let _guard = DownOnPanic::new(dir.path(), name);
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines("started", 3, TIMEOUT);
+    let mut log = StepLog::new(dir.path().join("steps.log"));
+    let goal = run_agp(
+        dir.path(),
+        &["goal", "--instance", name, "--place", "300", "150", "90"],
+        TIMEOUT,
+    );
+    goal.assert_success("`agp goal`");
+    // Mid-goal: the Rust planner has found the object and pushed (a circling is about
+    // 7,000 steps); the Python one takes over, and after a push or two the Rust one again.
+    up.until("the Rust planner's first 12,000 steps", TIMEOUT, || {
+        log.len() >= 12_000
+    });
+    swap(dir.path(), name, &python_s, &py_args);
+    up.until("the Python planner's 15,000 steps", TIMEOUT, || {
+        log.poll().iter().filter(|l| l.1 == 1).count() >= 15_000
+    });
+    let rust = agp_tests::bin_path("agp-planner");
+    swap(dir.path(), name, &rust.display().to_string(), &rust_args);
+    let done = wait_goals_done(dir.path(), name, 1);
+    let g = &done[0];
+    down(dir.path(), name, up);
+    let log = log.poll();
+    assert_every_step_applied_once(log);
+    let epochs: std::collections::BTreeSet<u64> = log.iter().map(|l| l.1).collect();
+    assert_eq!(
+        epochs,
+        [0, 1, 2].into_iter().collect(),
+        "Rust, Python and Rust again drove"
+    );
+    assert_eq!(g["success"], true, "the goal was not reached: {g}");
+    println!(
+        "goal 1 ({}): {} steps, Python drove {}; final error {} mm, {} deg",
+        g["end"],
+        log.len(),
+        log.iter().filter(|l| l.1 == 1).count(),
+        g["position_error_mm"],
+        g["orientation_error_deg"]
+    );
+}
+
+#[test]
+fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_without_losing_a_step() {
+    let name = "t-py-wheels-serve";
+    let python = python();
+    let wrappers = tempfile::tempdir().expect("a folder");
+    let python_s = python_wrapper(wrappers.path(), &python);
+    let args = vec![
+        example("wheel_planner.py").display().to_string(),
+        "--serve".to_owned(),
+    ];
+    let dir = LaunchDir::new(&live_launch(
+        name,
+        &learned_ag("triangle"),
+        &python_s,
+        &args,
+    ));
+    let _guard = DownOnPanic::new(dir.path(), name);
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines("started", 3, TIMEOUT);
+    let mut log = StepLog::new(dir.path().join("steps.log"));
+    for place in [["300", "150", "90"], ["200", "0", "0"]] {
+        let mut words = vec!["goal", "--instance", name, "--place"];
+        words.extend_from_slice(&place);
+        run_agp(dir.path(), &words, TIMEOUT).assert_success("`agp goal`");
+    }
+    // Mid-goal 1 (the nudge takes about 1,800 steps): the same planner again, hot.
+    let before = log.len();
+    up.until("goal 1 under way", TIMEOUT, || log.len() >= before + 600);
+    swap(dir.path(), name, &python_s, &args);
+    let done = wait_goals_done(dir.path(), name, 2);
+    down(dir.path(), name, up);
+    let log = log.poll();
+    assert_every_step_applied_once(log);
+    assert!(
+        log.iter().any(|l| l.1 == 1),
+        "the swapped-in planner never drove"
+    );
+    for g in &done {
+        assert_eq!(g["state"], "done", "{g}");
+        assert_eq!(g["end"], "done", "the planner's word for its end: {g}");
+    }
+    println!(
+        "{} steps, epochs 0 and 1; goals: {}",
+        log.len(),
+        done.iter()
+            .map(|g| format!("{} {} ({} s)", g["id"], g["end"], g["sim_time_s"]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
 }

@@ -315,7 +315,10 @@ class Ring:
                     f"no frame after step {after_step} with its estimate within {self.timeout_s:.0f} s: "
                     "are agp-physics and agp-estimator running on this instance?"
                 )
-            self.estimates_ev.timed_wait(wait)
+            try:
+                self.estimates_ev.timed_wait(wait)
+            except Exception:  # ListenerWaitError.InterruptSignal: a signal came (SIGTERM)
+                pass
 
     # -- acting --------------------------------------------------------------------------------
 

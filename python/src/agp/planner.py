@@ -314,7 +314,7 @@ def _run_wheels(planner: Planner) -> int:
     if not serve:
         goal = _scenario_goal()
     obs = Obs()
-    started = ring.frame.sim_time_s
+    started, wall, steps = ring.frame.sim_time_s, time.monotonic(), 0
     try:
         while True:
             if serve and goal is None:
@@ -324,7 +324,7 @@ def _run_wheels(planner: Planner) -> int:
             if goal is not None and obs.goal is not goal:
                 obs.goal = goal
                 tasks.send(goal)
-                started = ring.frame.sim_time_s
+                started, wall, steps = ring.frame.sim_time_s, time.monotonic(), ring.steps
                 _say(f"goal {goal.id}: place at ({goal.x_mm:.0f}, {goal.y_mm:.0f}) mm, {goal.theta_deg:.0f} deg")
                 planner.on_goal(goal)
             try:
@@ -335,7 +335,8 @@ def _run_wheels(planner: Planner) -> int:
                 wheels = planner.step(obs)
                 if wheels is None:
                     spent = ring.frame.sim_time_s - started
-                    _say(f"goal {goal.id} done after {spent:.1f} s simulated, {ring.steps} steps")
+                    n, w = ring.steps - steps, time.monotonic() - wall
+                    _say(f"goal {goal.id} done after {spent:.1f} s simulated, {n} steps in {w:.2f} s wall ({n / max(w, 1e-9):.0f} steps/s)")
                     if not serve:
                         return 0
                     answer = control.goal_done(goal.id, "done", spent)
