@@ -28,7 +28,8 @@ const TIMEOUT: Duration = Duration::from_secs(60);
 const PLACE_TIMEOUT: Duration = Duration::from_secs(600);
 
 /// Instance A: physics (logging every applied step) and the estimator serving the learned
-/// AG file `ag`; the planner is remote, reached through the bridge listening on `port`.
+/// AG file `ag`; the planner is remote, reached through the bridge listening on `port`
+/// (plain TCP, `insecure = true`: `tests/tests/bridge_tls.rs` runs the link on mutual TLS).
 /// A's run ends when B's does (its bridge says so).
 fn robot_launch(instance: &str, ag: &Path, port: u16) -> String {
     format!(
@@ -36,7 +37,7 @@ fn robot_launch(instance: &str, ag: &Path, port: u16) -> String {
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--step-log\", \"steps.log\"]\n\n\
          [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
          [[process]]\nname = \"planner\"\n\
-         remote = {{ role = \"planner\", listen = \"tcp/127.0.0.1:{port}\" }}\nends_run = true\n",
+         remote = {{ role = \"planner\", listen = \"tcp/127.0.0.1:{port}\", insecure = true }}\nends_run = true\n",
         ag.display()
     )
 }
@@ -47,7 +48,7 @@ fn planner_launch(instance: &str, port: u16) -> String {
     format!(
         "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"robot\"\n\
-         remote = {{ role = \"robot\", connect = \"tcp/127.0.0.1:{port}\" }}\n\n\
+         remote = {{ role = \"robot\", connect = \"tcp/127.0.0.1:{port}\", insecure = true }}\n\n\
          [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
          args = [\"--mode\", \"place\", \"--planner\", \"affordance\"]\nends_run = true\n"
     )

@@ -35,6 +35,7 @@ use zenoh::qos::CongestionControl;
 use crate::endpoint::Endpoint;
 use crate::ports::{Auth, InPort, OutPort, Restamp, in_port, out_port};
 use crate::route::{BRIDGED_TOPICS, BridgedTopic, Latch, Side};
+use crate::tls::TlsKeys;
 use crate::wire::{self, Header, WireDecodeError};
 
 /// How a bridge runs.
@@ -42,6 +43,9 @@ use crate::wire::{self, Header, WireDecodeError};
 pub struct BridgeConfig {
     pub side: Side,
     pub endpoint: Endpoint,
+    /// This side's keys of the link (a `tls/` endpoint: mutual TLS); `None` for a `tcp/`
+    /// endpoint, plain TCP with no authentication.
+    pub tls: Option<TlsKeys>,
     /// The topics carried, both ways (each goes the way [`BridgedTopic::from`] says); both
     /// ends must carry the same.
     pub topics: Vec<BridgedTopic>,
@@ -171,7 +175,7 @@ pub fn run_bridge(
     }
     let zconfig = config
         .endpoint
-        .zenoh_config()
+        .zenoh_config(config.tls.as_ref())
         .map_err(|detail| BridgeError::Session {
             endpoint: config.endpoint.locator().to_owned(),
             detail,

@@ -1,7 +1,11 @@
-//! Where the Zenoh link runs: one end listens on a TCP endpoint, the other connects to it;
-//! nothing is scouted.
+//! Where the Zenoh link runs: one end listens on an endpoint, the other connects to it;
+//! nothing is scouted. `tls/HOST:PORT` is Zenoh's TLS transport with mutual authentication
+//! (both ends show a certificate of the link's CA, [`crate::tls`]); `tcp/HOST:PORT` is plain
+//! TCP, with no authentication and no encryption.
 
-/// One end of the link: `tcp/HOST:PORT`, listened on or connected to.
+use crate::tls::TlsKeys;
+
+/// One end of the link: `tls/HOST:PORT` or `tcp/HOST:PORT`, listened on or connected to.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Endpoint {
     Listen(String),
@@ -11,9 +15,11 @@ pub enum Endpoint {
 /// Why an endpoint was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum EndpointParseError {
-    #[error("`{0}` is not a TCP endpoint: expected `tcp/HOST:PORT`, e.g. `tcp/127.0.0.1:7447`")]
+    #[error(
+        "`{0}` is not a TLS or TCP endpoint: expected `tls/HOST:PORT` (or `tcp/HOST:PORT`, insecure), e.g. `tls/127.0.0.1:7447`"
+    )]
     NotTcp(String),
-    #[error("`{0}` has no port from 1 to 65535: expected `tcp/HOST:PORT`")]
+    #[error("`{0}` has no port from 1 to 65535: expected `tls/HOST:PORT` or `tcp/HOST:PORT`")]
     BadPort(String),
 }
 
@@ -25,9 +31,18 @@ impl Endpoint {
         }
     }
 
-    /// Checks `tcp/HOST:PORT` (an IPv6 host in brackets: `tcp/[::1]:7447`).
+    /// Whether the endpoint is Zenoh's TLS transport (`tls/`), not plain TCP.
+    pub fn is_tls(&self) -> bool {
+        self.locator().starts_with("tls/")
+    }
+
+    /// Checks `tls/HOST:PORT` or `tcp/HOST:PORT` (an IPv6 host in brackets:
+    /// `tls/[::1]:7447`).
     pub fn check(locator: &str) -> Result<(), EndpointParseError> {
-        let Some(rest) = locator.strip_prefix("tcp/") else {
+        let Some(rest) = locator
+            .strip_prefix("tls/")
+            .or_else(|| locator.strip_prefix("tcp/"))
+        else {
             return Err(EndpointParseError::NotTcp(locator.to_owned()));
         };
         let Some((host, port)) = rest.rsplit_once(':') else {
@@ -39,6 +54,21 @@ impl Endpoint {
         match port.parse::<u16>() {
             Ok(p) if p > 0 => Ok(()),
             _ => Err(EndpointParseError::BadPort(locator.to_owned())),
+        }
+    }
+
+    /// Why `locator` does not fit the link's security, if it does not: a `tls/` endpoint
+    /// needs the link's keys, a `tcp/` endpoint (plain TCP) takes none.
+    pub fn security_fault(locator: &str, keys: bool) -> Option<String> {
+        match (locator.starts_with("tls/"), keys) {
+            (true, false) => Some(format!(
+                "`{locator}` is a TLS endpoint: give the link's keys (`tls = \"DIR\"`, `--tls DIR`; made by `agp bridge keygen DIR`)"
+            )),
+            (false, true) => Some(format!(
+                "`{locator}` is plain TCP, but the link's keys were given: write `tls/{}`",
+                locator.trim_start_matches("tcp/")
+            )),
+            _ => None,
         }
     }
 
@@ -56,8 +86,9 @@ impl Endpoint {
 
     /// The Zenoh configuration of this end: a peer that listens on this endpoint only, or
     /// connects to it only (and listens nowhere), with multicast and gossip scouting off,
-    /// so the bridge opens no socket but the one named.
-    pub(crate) fn zenoh_config(&self) -> Result<zenoh::Config, String> {
+    /// so the bridge opens no socket but the one named. A `tls/` endpoint takes `tls`, the
+    /// link's keys of this side, and requires mutual authentication; a `tcp/` one takes none.
+    pub(crate) fn zenoh_config(&self, tls: Option<&TlsKeys>) -> Result<zenoh::Config, String> {
         let mut c = zenoh::Config::default();
         let json = |v: &str| serde_json_string(v);
         let (listen, connect) = match self {
@@ -76,6 +107,28 @@ impl Endpoint {
         ] {
             c.insert_json5(key, &value)
                 .map_err(|e| format!("zenoh config `{key}`: {e}"))?;
+        }
+        match (self.is_tls(), tls) {
+            (true, Some(keys)) => {
+                let path = |p: &std::path::Path| json(&p.display().to_string());
+                for (key, value) in [
+                    ("root_ca_certificate", path(&keys.ca)),
+                    ("listen_certificate", path(&keys.cert)),
+                    ("listen_private_key", path(&keys.key)),
+                    ("connect_certificate", path(&keys.cert)),
+                    ("connect_private_key", path(&keys.key)),
+                    ("enable_mtls", "true".to_owned()),
+                    ("verify_name_on_connect", "true".to_owned()),
+                ] {
+                    c.insert_json5(&format!("transport/link/tls/{key}"), &value)
+                        .map_err(|e| format!("zenoh config `{key}`: {e}"))?;
+                }
+            }
+            (_, keys) => {
+                if let Some(fault) = Self::security_fault(self.locator(), keys.is_some()) {
+                    return Err(fault);
+                }
+            }
         }
         Ok(c)
     }
@@ -105,6 +158,8 @@ mod tests {
     fn a_tcp_endpoint_with_a_port_is_taken_and_anything_else_refused() {
         assert!(Endpoint::listen("tcp/127.0.0.1:7447").is_ok());
         assert!(Endpoint::connect("tcp/[::1]:7447").is_ok());
+        assert!(Endpoint::connect("tls/[::1]:7447").is_ok_and(|e| e.is_tls()));
+        assert!(Endpoint::listen("tcp/127.0.0.1:7447").is_ok_and(|e| !e.is_tls()));
         assert!(matches!(
             Endpoint::listen("udp/127.0.0.1:7447"),
             Err(EndpointParseError::NotTcp(_))

@@ -5,11 +5,15 @@
 //! planner side, commands, resets, the planner's events and the task back ([`BRIDGED_TOPICS`]).
 //! The latched state (the latest frame, estimate and task, the latest whole grid set) is
 //! sent once to a far end that joins, then only what is published: a grid set crosses once.
+//!
+//! The link runs over Zenoh's TLS transport with mutual authentication ([`tls`]: a CA of
+//! the link's own, a certificate per side), or over plain TCP when asked for explicitly.
 
 mod bridge;
 mod endpoint;
 mod ports;
 mod route;
+pub mod tls;
 pub mod wire;
 
 pub use bridge::{BridgeConfig, BridgeEnd, BridgeError, BridgeReport, run_bridge};
@@ -19,3 +23,4 @@ pub use route::{
     BRIDGED_TOPICS, BridgedTopic, Latch, Side, TopicListParseError, all_topics, bridged_topic,
     parse_topics,
 };
+pub use tls::{TlsError, TlsKeys, keygen};

@@ -2,31 +2,49 @@
 //! (agp-bridge's `run_bridge`), so the planner of one instance drives the physics and
 //! estimator of another that shares no memory with it. A launch file's `remote = { ... }`
 //! process runs it as a child of `agp up`, with the epoch and token of the slot.
+//!
+//! The link is Zenoh's TLS transport with mutual authentication (`--tls DIR`, a key folder
+//! made by `agp bridge keygen DIR`), or plain TCP only when asked for with `--insecure`.
 
-use agp_bridge::{BridgeConfig, BridgeEnd, Endpoint, Side, parse_topics, run_bridge};
+use std::path::{Path, PathBuf};
+
+use agp_bridge::{BridgeConfig, BridgeEnd, Endpoint, Side, TlsKeys, parse_topics, run_bridge};
 use agp_runtime::WaitStrategy;
 use agp_shared_types::{SessionKey, session_token_from_env};
 use anyhow::{Context, Result, anyhow, bail};
 
 /// `agp bridge`.
 #[derive(Debug, clap::Args)]
+#[command(subcommand_negates_reqs = true)]
 #[command(group(clap::ArgGroup::new("endpoint").required(true).args(["listen", "connect"])))]
+#[command(group(clap::ArgGroup::new("security").required(true).args(["tls", "insecure"])))]
 pub(crate) struct BridgeArgs {
+    #[command(subcommand)]
+    command: Option<BridgeCommand>,
     /// The instance whose topics are bridged (a supervisor must run it).
-    #[arg(long, env = "AGP_INSTANCE")]
-    instance: String,
+    #[arg(long, env = "AGP_INSTANCE", required = true)]
+    instance: Option<String>,
     /// `robot`: this instance runs physics and the estimator (it sends frames, estimates,
     /// grids, learning reports and a live session's goal, and takes commands, resets, the
     /// planner's events, the task and the goals the planner ended); `planner`: this
     /// instance runs the planner (the other way round).
-    #[arg(long)]
-    side: String,
-    /// Listen for the far end on this TCP endpoint, e.g. `tcp/127.0.0.1:7447`.
+    #[arg(long, required = true)]
+    side: Option<String>,
+    /// Listen for the far end on this endpoint, e.g. `tls/127.0.0.1:7447` (with `--tls`)
+    /// or `tcp/127.0.0.1:7447` (with `--insecure`).
     #[arg(long)]
     listen: Option<String>,
-    /// Connect to the far end on this TCP endpoint (retried until it answers).
+    /// Connect to the far end on this endpoint (retried until it answers).
     #[arg(long)]
     connect: Option<String>,
+    /// The link's key folder (`agp bridge keygen DIR`): the link runs over TLS, and only a
+    /// far end with a certificate of its CA joins it.
+    #[arg(long, value_name = "DIR")]
+    tls: Option<PathBuf>,
+    /// Run the link over plain TCP: no authentication, no encryption; any host that reaches
+    /// the port can join it and drive this instance.
+    #[arg(long)]
+    insecure: bool,
     /// The topics carried, comma-separated (both ends must name the same): grids,
     /// ir_frames, estimates, learn_reports, goal, learn_events, task, resets,
     /// motor_commands, goal_ends, or `all`.
@@ -41,25 +59,80 @@ pub(crate) struct BridgeArgs {
     epoch: u64,
 }
 
+/// `agp bridge`'s subcommands.
+#[derive(Debug, clap::Subcommand)]
+enum BridgeCommand {
+    /// Make a key folder for a TLS link: a CA of its own, and a certificate and private key
+    /// per side (robot, planner), valid for localhost, 127.0.0.1, ::1 and each `--host`.
+    /// Private keys are written 0600, the folder 0700; nothing is overwritten. Copy the
+    /// folder to both computers (or `ca.pem` and the side's two files), and give it to
+    /// both ends (`--tls DIR`, or `tls = "DIR"` in the launch file's `remote`).
+    ///
+    /// Example: agp bridge keygen results/bridge-keys --host robot.lab --host 192.168.1.10
+    Keygen {
+        /// The folder to make (refused if it already holds keys).
+        dir: PathBuf,
+        /// Another name or address the far end connects by (repeatable).
+        #[arg(long = "host", value_name = "NAME")]
+        hosts: Vec<String>,
+    },
+}
+
+/// The warning a bridge on plain TCP starts with.
+pub(crate) fn insecure_warning(locator: &str) -> String {
+    format!(
+        "agp: warning: the bridge runs on plain TCP (`{locator}`, insecure): no authentication, no encryption; any host that reaches it can join the link and drive this instance. Use TLS: `agp bridge keygen DIR`, then `--tls DIR` with a `tls/` endpoint"
+    )
+}
+
+/// `agp bridge keygen DIR`.
+fn keygen(dir: &Path, hosts: &[String]) -> Result<u8> {
+    let written = agp_bridge::keygen(dir, hosts)?;
+    println!(
+        "agp: made the bridge's keys in {} (give both ends this folder: `tls = \"{}\"`, or `--tls {}`):",
+        dir.display(),
+        dir.display(),
+        dir.display()
+    );
+    for f in written {
+        println!("  {}", f.display());
+    }
+    Ok(0)
+}
+
 pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
+    if let Some(BridgeCommand::Keygen { dir, hosts }) = &args.command {
+        return keygen(dir, hosts);
+    }
+    let (Some(instance_name), Some(side_name)) = (&args.instance, &args.side) else {
+        bail!("give --instance and --side (or `agp bridge keygen DIR`)");
+    };
     agp_runtime::install_shutdown_handler();
-    let side = Side::parse(&args.side).ok_or_else(|| {
-        anyhow!(
-            "unknown side `{}`; expected `robot` or `planner`",
-            args.side
-        )
-    })?;
+    let side = Side::parse(side_name)
+        .ok_or_else(|| anyhow!("unknown side `{side_name}`; expected `robot` or `planner`"))?;
     let endpoint = match (&args.listen, &args.connect) {
         (Some(l), None) => Endpoint::listen(l)?,
         (None, Some(c)) => Endpoint::connect(c)?,
         _ => bail!("give one of --listen and --connect"),
     };
+    let tls = match (&args.tls, args.insecure) {
+        (Some(dir), false) => Some(TlsKeys::load(dir, side)?),
+        (None, true) => None,
+        _ => bail!("give one of --tls DIR and --insecure"),
+    };
+    if let Some(fault) = Endpoint::security_fault(endpoint.locator(), tls.is_some()) {
+        bail!("{fault}");
+    }
+    if tls.is_none() {
+        eprintln!("{}", insecure_warning(endpoint.locator()));
+    }
     let topics = parse_topics(&args.topics)?;
-    let instance = crate::control::running_instance(&args.instance)?;
+    let instance = crate::control::running_instance(instance_name)?;
     let key = SessionKey::from_env().map_err(|e| anyhow!(e))?;
     let config = BridgeConfig {
         side,
         endpoint: endpoint.clone(),
+        tls,
         topics,
         link: args.link.clone(),
         epoch: args.epoch,
@@ -71,25 +144,30 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
     let names: Vec<&str> = config.topics.iter().map(|t| t.name).collect();
     let report = run_bridge(&instance, &config, || {
         println!(
-            "agp: bridge of instance `{}` ({} side) {} {}, link `{}`: {}",
-            args.instance,
+            "agp: bridge of instance `{}` ({} side) {} {} ({}), link `{}`: {}",
+            instance_name,
             side.name(),
             match endpoint {
                 Endpoint::Listen(_) => "listening on",
                 Endpoint::Connect(_) => "connecting to",
             },
             endpoint.locator(),
+            if endpoint.is_tls() {
+                "mutual TLS"
+            } else {
+                "plain TCP, insecure"
+            },
             args.link,
             names.join(", ")
         );
     })
-    .with_context(|| format!("bridge of instance `{}`", args.instance))?;
+    .with_context(|| format!("bridge of instance `{}`", instance_name))?;
     let why = match report.end {
         BridgeEnd::FarEnded => "the far end stopped",
         BridgeEnd::Stopped => "stopped",
         BridgeEnd::InstanceDown => "the instance went down",
     };
-    println!("agp: bridge of instance `{}` ended: {why}", args.instance);
+    println!("agp: bridge of instance `{}` ended: {why}", instance_name);
     for (name, sent, received) in &report.topics {
         println!("  {name:<16} sent {sent:>9}  received {received:>9}");
     }

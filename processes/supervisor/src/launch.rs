@@ -28,13 +28,16 @@
 //! ```toml
 //! [[process]]
 //! name = "planner"              # the planner runs under another supervisor
-//! remote = { role = "planner", listen = "tcp/127.0.0.1:7447" }
+//! remote = { role = "planner", listen = "tls/127.0.0.1:7447", tls = "keys" }
 //! ends_run = true               # the far end stopping ends this run too
 //! ```
 //!
 //! `role` is what the remote process is: `planner` (this instance runs physics and the
 //! estimator: the bridge's robot side) or `robot` (the far instance runs them: the bridge's
-//! planner side). One of `listen` and `connect` (`tcp/HOST:PORT`); optional `topics` (the
+//! planner side). One of `listen` and `connect` (`tls/HOST:PORT`); `tls`, the link's key
+//! folder made by `agp bridge keygen DIR` (relative: to this file; its private key must be
+//! 0600 and this user's), or `insecure = true` for a `tcp/HOST:PORT` endpoint (plain TCP: no
+//! authentication, no encryption), and nothing else starts a remote; optional `topics` (the
 //! topics carried, default all) and `link` (the Zenoh key prefix both ends share, default
 //! `agp`).
 //!
@@ -450,8 +453,8 @@ struct RawProcess {
     stop_grace_ms: Option<Spanned<u64>>,
 }
 
-/// `remote = { role = "planner" | "robot", listen | connect = "tcp/HOST:PORT", topics = [..],
-/// link = ".." }`.
+/// `remote = { role = "planner" | "robot", listen | connect = "tls/HOST:PORT", tls = "DIR",
+/// topics = [..], link = ".." }` (or `tcp/HOST:PORT` with `insecure = true`).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawRemote {
@@ -460,6 +463,8 @@ struct RawRemote {
     connect: Option<String>,
     topics: Option<Vec<String>>,
     link: Option<String>,
+    tls: Option<String>,
+    insecure: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -984,7 +989,7 @@ fn resolve_exec(
                     },
                 );
             }
-            (exec, Some(remote_bridge_args(check, name, remote)))
+            (exec, Some(remote_bridge_args(check, name, remote, base)))
         }
         (Some(raw_exec), Some(_)) => {
             check.fault_at(
@@ -1137,11 +1142,12 @@ fn remote_bridge_args(
         }
     };
     let (flag, endpoint) = match (&r.listen, &r.connect) {
+    base: &Path,
         (Some(l), None) => ("--listen", l.clone()),
         (None, Some(c)) => ("--connect", c.clone()),
         _ => {
             faults
-                .push("`remote` needs one of `listen` and `connect` (`tcp/HOST:PORT`)".to_owned());
+                .push("`remote` needs one of `listen` and `connect` (`tls/HOST:PORT`)".to_owned());
             ("--listen", String::new())
         }
     };
@@ -1164,6 +1170,7 @@ fn remote_bridge_args(
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
     {
+    let security = remote_security(r, side, &endpoint, base, &mut faults);
         faults.push(format!(
             "bad `remote.link` `{link}`: 1 to 64 letters, digits, `-` and `_`"
         ));
@@ -1177,7 +1184,7 @@ fn remote_bridge_args(
             },
         );
     }
-    vec![
+    let mut args = vec![
         "bridge".to_owned(),
         "--side".to_owned(),
         side.name().to_owned(),
@@ -1187,7 +1194,48 @@ fn remote_bridge_args(
         topics,
         "--link".to_owned(),
         link,
-    ]
+    ];
+    args.extend(security);
+    args
+}
+
+/// The security arguments of a `remote`'s bridge: `--tls DIR` (the key folder, relative to
+/// the launch file; the side's keys checked now, so a key open to others stops the run
+/// before anything starts) or `--insecure`. A `remote` that names neither is refused.
+fn remote_security(
+    r: &RawRemote,
+    side: agp_bridge::Side,
+    endpoint: &str,
+    base: &Path,
+    faults: &mut Vec<String>,
+) -> Vec<String> {
+    let args = match (&r.tls, r.insecure.unwrap_or(false)) {
+        (Some(dir), false) => {
+            let dir = base.join(dir);
+            if let Err(e) = agp_bridge::TlsKeys::load(&dir, side) {
+                faults.push(format!("`remote.tls`: {e}"));
+            }
+            vec!["--tls".to_owned(), dir.display().to_string()]
+        }
+        (None, true) => vec!["--insecure".to_owned()],
+        (Some(_), true) => {
+            faults.push("`remote` names both `tls` and `insecure = true`: give one".to_owned());
+            return Vec::new();
+        }
+        (None, false) => {
+            faults.push(
+                "`remote` needs `tls = \"DIR\"`, the link's key folder (made by `agp bridge keygen DIR`), or `insecure = true` for plain TCP: no authentication, no encryption"
+                    .to_owned(),
+            );
+            return Vec::new();
+        }
+    };
+    if !endpoint.is_empty()
+        && let Some(fault) = agp_bridge::Endpoint::security_fault(endpoint, r.tls.is_some())
+    {
+        faults.push(fault);
+    }
+    args
 }
 
 /// The name of the process `record = "FILE"` adds.
@@ -1838,7 +1886,7 @@ stop_grace_ms = 500
     const REMOTE: &str = "instance = \"lab\"\nscenario = \"triangle\"\n\
         [[process]]\nname = \"physics\"\nexec = \"agp-fake\"\n\
         [[process]]\nname = \"planner\"\n\
-        remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\" }\nends_run = true\n";
+        remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\", insecure = true }\nends_run = true\n";
 
     fn with_agp(f: &Fixture) {
         let path = f.dir.path().join("bin/agp");
@@ -1879,6 +1927,7 @@ stop_grace_ms = 500
             "--side",
             "planner",
             "--connect",
+            "--insecure",
             "tcp/127.0.0.1:7447",
             "--topics",
             "ir_frames,motor_commands",
@@ -1898,12 +1947,13 @@ stop_grace_ms = 500
             (
                 "role = \"planner\"",
                 "role = \"camera\"",
+            "--insecure",
                 "unknown remote role `camera`",
             ),
             (
                 "listen = \"tcp/127.0.0.1:7447\"",
                 "listen = \"udp/127.0.0.1:7447\"",
-                "is not a TCP endpoint",
+                "is not a TLS or TCP endpoint",
             ),
             (
                 "listen = \"tcp/127.0.0.1:7447\"",
@@ -1940,7 +1990,7 @@ stop_grace_ms = 500
         assert_eq!(line, Some(8), "{shown}");
         assert!(shown.contains("no `args`"), "{shown}");
         let text = REMOTE.replace(
-            "remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\" }\n",
+            "remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\", insecure = true }\n",
             "",
         );
         let (line, shown, _) = f.fault(&text);
@@ -1951,3 +2001,71 @@ stop_grace_ms = 500
         );
     }
 }
+
+    #[test]
+    fn a_remote_over_tls_takes_its_key_folder_from_beside_the_launch_file() {
+        let f = Fixture::new();
+        with_agp(&f);
+        agp_bridge::keygen(&f.dir.path().join("keys"), &[]).expect("keygen");
+        let text = REMOTE.replace(
+            "listen = \"tcp/127.0.0.1:7447\", insecure = true",
+            "listen = \"tls/127.0.0.1:7447\", tls = \"keys\"",
+        );
+        let config = f.parse(&text).expect("a valid file");
+        let args = &config.processes[1].args;
+        let at = args.iter().position(|a| a == "--tls").expect("--tls");
+        assert_eq!(
+            args[at + 1],
+            f.dir.path().join("keys").display().to_string(),
+            "{args:?}"
+        );
+        assert!(args.contains(&"tls/127.0.0.1:7447".to_owned()), "{args:?}");
+        assert!(!args.contains(&"--insecure".to_owned()), "{args:?}");
+    }
+
+    #[test]
+    fn a_remote_without_tls_or_insecure_or_with_an_open_key_is_refused_on_its_line() {
+        let f = Fixture::new();
+        with_agp(&f);
+        let keys = f.dir.path().join("keys");
+        agp_bridge::keygen(&keys, &[]).expect("keygen");
+        let (line, shown, _) =
+            f.fault(&REMOTE.replace("\", insecure = true", "\", tls = \"keys\""));
+        assert_eq!(line, Some(8), "{shown}");
+        assert!(
+            shown.contains("is plain TCP, but the link's keys were given"),
+            "{shown}"
+        );
+        let open_key = keys.join(agp_bridge::tls::key_file(agp_bridge::Side::Robot));
+        std::fs::set_permissions(&open_key, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+        let open_key = open_key.display().to_string();
+        let cases = [
+            (", insecure = true", "", "`remote` needs `tls = \"DIR\"`"),
+            (
+                "tcp/127.0.0.1:7447\", insecure = true",
+                "tls/127.0.0.1:7447\", tls = \"keys\"",
+                open_key.as_str(),
+            ),
+            (
+                "tcp/127.0.0.1:7447\", insecure = true",
+                "tls/127.0.0.1:7447\", tls = \"elsewhere\"",
+                "no such file: make the key folder with `agp bridge keygen DIR`",
+            ),
+            (
+                "tcp/127.0.0.1:7447\", insecure = true",
+                "tls/127.0.0.1:7447\", insecure = true",
+                "is a TLS endpoint: give the link's keys",
+            ),
+            (
+                ", insecure = true",
+                ", insecure = true, tls = \"keys\"",
+                "names both `tls` and `insecure = true`",
+            ),
+        ];
+        for (from, to, says) in cases {
+            let (line, shown, kind) = f.fault(&REMOTE.replace(from, to));
+            assert_eq!(line, Some(8), "{shown}");
+            assert!(matches!(kind, LaunchFaultKind::BadRemote { .. }), "{shown}");
+            assert!(shown.contains(says), "{shown}");
+        }
+    }

@@ -106,12 +106,15 @@ enum Cmd {
     /// Forward chosen topics of a running instance to a Zenoh session and back, so the
     /// planner of one instance drives the physics and estimator of another that shares no
     /// memory with it (another computer, or another instance on this one). One end listens,
-    /// the other connects; nothing is scouted. A launch file's `remote = { ... }` process
-    /// runs it with the run.
+    /// the other connects; nothing is scouted. The link is mutual TLS with the keys of
+    /// `agp bridge keygen DIR`, or plain TCP with `--insecure`. A launch file's
+    /// `remote = { ... }` process runs it with the run.
     ///
-    /// Example: agp bridge --instance lab --side robot --listen tcp/127.0.0.1:7447
+    /// Example: agp bridge keygen results/bridge-keys
     ///
-    /// Example: agp bridge --instance desk --side planner --connect tcp/127.0.0.1:7447
+    /// Example: agp bridge --instance lab --side robot --listen tls/127.0.0.1:7447 --tls results/bridge-keys
+    ///
+    /// Example: agp bridge --instance desk --side planner --connect tls/127.0.0.1:7447 --tls results/bridge-keys
     Bridge(bridge::BridgeArgs),
     #[command(name = "replay-driver", hide = true)]
     ReplayDriver(replay::DriverArgs),

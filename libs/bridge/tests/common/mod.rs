@@ -17,6 +17,7 @@ pub fn config(side: Side, endpoint: Endpoint, link: &str, epoch: u64, token: u64
     BridgeConfig {
         side,
         endpoint,
+        tls: None,
         topics: all_topics(),
         link: link.to_owned(),
         epoch,
