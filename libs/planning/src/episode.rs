@@ -31,6 +31,7 @@
 //! estimates and the IR readings, nothing else.
 
 use agp_shared_types::angle;
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use agp_affordance::{AffordanceGradient, Prediction, learned_border_radius_m, symmetry_order_of};
@@ -714,25 +715,9 @@ const MAX_FAILED_ESTIMATES: u32 = 3;
 
 impl<W: World> Episode<'_, '_, W> {
     fn run(&mut self) -> Result<EpisodeEnd, WorldStepError> {
-        let config = self.run.config;
         let oracle = self.planner.reads_ground_truth();
-        // findObj + EstimateOrientationObj: the robot starts facing the object, or, in a
-        // world under way (a planner swapped in, a later goal of a live session), the
-        // estimator still holds the object's pose: the first circling starts from there.
-        let mut est = if let Some(e) = self.resume.take() {
-            e
-        } else if oracle {
-            Estimate::fresh(self.oracle_truth()?)
-        } else {
-            let guess = if config.start_from_estimate {
-                perceived_pose(self.run.world.perceived())
-            } else {
-                None
-            };
-            match self.estimate(guess)? {
-                Some(e) => e,
-                None => return Ok(EpisodeEnd::Lost),
-            }
+        let Some(mut est) = self.first_estimate(oracle)? else {
+            return Ok(EpisodeEnd::Lost);
         };
         let mut failed = 0;
         loop {
@@ -743,132 +728,200 @@ impl<W: World> Episode<'_, '_, W> {
             if est.pushes_since == 0
                 && let Some(before) = self.planned_from.take()
             {
-                let moved = (est.position() - DVec2::new(before.x, before.y)).length();
-                let period = if self.order == 0 {
-                    f64::INFINITY
-                } else {
-                    std::f64::consts::TAU / f64::from(self.order)
-                };
-                let turned = angle::distance(est.pose.theta - before.theta, 0.0, period);
-                // A push that reaches the object moves it 9 mm or more; the estimates agree
-                // to a millimetre or two.
-                self.push_longer = moved < 0.003 && turned < 3f64.to_radians();
-                if self.push_longer {
-                    self.trace(format_args!("the last pushes left the object where it was"));
-                }
+                self.note_whether_the_pushes_moved(&est, before);
             }
             if self.done(&est) {
                 if est.pushes_since == 0 {
                     return Ok(EpisodeEnd::Done);
                 }
-                match self.estimate(Some(est.pose))? {
-                    Some(e) => {
-                        est = e;
-                        failed = 0;
-                        continue;
-                    }
-                    None => {
-                        failed += 1;
-                        if failed >= MAX_FAILED_ESTIMATES {
-                            return Ok(EpisodeEnd::Lost);
-                        }
-                    }
+                match self.estimate_again(&mut est, &mut failed)? {
+                    ControlFlow::Break(end) => return Ok(end),
+                    ControlFlow::Continue(true) => continue,
+                    ControlFlow::Continue(false) => {}
                 }
             }
-            if self.pushes >= config.max_pushes {
-                return Ok(EpisodeEnd::MaxPushes);
+            if let Some(end) = self.out_of_budget_or_newer_gradient(&est) {
+                return Ok(end);
             }
-            if self.run.elapsed() > config.max_sim_time_s {
-                return Ok(EpisodeEnd::TimeLimit);
-            }
-            if matches!(self.brain, Brain::Gradient { .. })
-                && let Some(newer) = self.run.world.newer_gradient()
-            {
-                // Between two pushes: plan the next on the newer gradient (online learning).
-                self.trace(format_args!("a newer gradient: planning on it"));
-                self.resume = Some(est);
-                self.newer = Some(newer);
-                return Ok(EpisodeEnd::Done);
-            }
-            let order = match self.ask_external(&est)? {
-                ExternalPush::Internal => self.plan(&est),
-                ExternalPush::Done => return Ok(EpisodeEnd::Done),
-                ExternalPush::GiveUp => return Ok(EpisodeEnd::Lost),
-                ExternalPush::Push {
-                    contact_deg,
-                    alpha_deg,
-                    length_m,
-                } => {
-                    let order = self.plan_external(&est, contact_deg, alpha_deg, length_m);
-                    if order.is_none() {
-                        self.trace(format_args!(
-                            "the push chosen ({contact_deg:.1} deg, alpha {alpha_deg:.1} deg) has no aim point or start"
-                        ));
-                    }
-                    order
-                }
-            };
-            let Some(order) = order else {
-                return Ok(EpisodeEnd::Lost);
+            let order = match self.choose_push(&est)? {
+                ControlFlow::Break(end) => return Ok(end),
+                ControlFlow::Continue(order) => order,
             };
             if est.pushes_since == 0 {
                 self.planned_from = Some(est.pose);
             }
-            self.push_longer = false;
-            let (target, _) = self.target(&est);
-            if (est.position() - target).length() <= 2.0 * config.tolerance_m {
-                self.near_pushes += 1;
-            }
-            self.trace(format_args!(
-                "plan from ({:.1}, {:.1}) mm {:.1} deg for {:.2} s, predicted {:?}",
-                order.start.x * 1e3,
-                order.start.y * 1e3,
-                order.start.theta.to_degrees(),
-                order.duration,
-                order
-                    .prediction
-                    .map(|p| (p.displacement * 1e3, p.rotation_rad.to_degrees()))
-            ));
-            let mut touched = false;
-            if self.run.travel(est.position(), order.orbit, order.start)? {
-                let pushed =
-                    self.run
-                        .push(order.duration, order.orbit + 0.03, !order.retry, order.plan)?;
-                // The estimator carries its estimate on by the push on the first frame after
-                // it: read it once the robot is backing off.
-                self.run.backoff()?;
-                if let Some(done) = pushed {
-                    touched = true;
-                    self.pushes += 1;
-                    est = self.update(est, done);
-                    self.trace(format_args!(
-                        "pushed: estimate ({:.1}, {:.1}) mm {:.1} deg",
-                        est.pose.x * 1e3,
-                        est.pose.y * 1e3,
-                        est.pose.theta.to_degrees()
-                    ));
-                }
-            }
-            if !touched {
-                self.trace(format_args!("no contact"));
-                // The object is not where the estimate says: find it again.
-                est.error_m = f64::INFINITY;
-            }
-            if self.needs_estimate(&est) {
-                match self.estimate(Some(est.pose))? {
-                    Some(e) => {
-                        est = e;
-                        failed = 0;
-                    }
-                    None => {
-                        failed += 1;
-                        if failed >= MAX_FAILED_ESTIMATES {
-                            return Ok(EpisodeEnd::Lost);
-                        }
-                    }
-                }
+            est = self.carry_out(est, &order)?;
+            if self.needs_estimate(&est)
+                && let ControlFlow::Break(end) = self.estimate_again(&mut est, &mut failed)?
+            {
+                return Ok(end);
             }
         }
+    }
+
+    /// findObj + EstimateOrientationObj: the robot starts facing the object, or, in a world
+    /// under way (a planner swapped in, a later goal of a live session), the estimator still
+    /// holds the object's pose: the first circling starts from there. `None`: the object
+    /// was not found.
+    fn first_estimate(&mut self, oracle: bool) -> Result<Option<Estimate>, WorldStepError> {
+        if let Some(e) = self.resume.take() {
+            return Ok(Some(e));
+        }
+        if oracle {
+            return Ok(Some(Estimate::fresh(self.oracle_truth()?)));
+        }
+        let guess = if self.run.config.start_from_estimate {
+            perceived_pose(self.run.world.perceived())
+        } else {
+            None
+        };
+        self.estimate(guess)
+    }
+
+    /// Whether the pushes planned from `before` left the object where it was (then the
+    /// next push is a full one), judged by the fresh estimate `est`.
+    fn note_whether_the_pushes_moved(&mut self, est: &Estimate, before: Pose2) {
+        let moved = (est.position() - DVec2::new(before.x, before.y)).length();
+        let period = if self.order == 0 {
+            f64::INFINITY
+        } else {
+            std::f64::consts::TAU / f64::from(self.order)
+        };
+        let turned = angle::distance(est.pose.theta - before.theta, 0.0, period);
+        // A push that reaches the object moves it 9 mm or more; the estimates agree to a
+        // millimetre or two.
+        self.push_longer = moved < 0.003 && turned < 3f64.to_radians();
+        if self.push_longer {
+            self.trace(format_args!("the last pushes left the object where it was"));
+        }
+    }
+
+    /// Circles the object for a new estimate from `est`. Found: `est` becomes it, the
+    /// failures are forgotten, `Continue(true)`. Not found: one more failure in a row,
+    /// `Continue(false)`, or `Break(Lost)` at MAX_FAILED_ESTIMATES of them.
+    fn estimate_again(
+        &mut self,
+        est: &mut Estimate,
+        failed: &mut u32,
+    ) -> Result<ControlFlow<EpisodeEnd, bool>, WorldStepError> {
+        match self.estimate(Some(est.pose))? {
+            Some(e) => {
+                *est = e;
+                *failed = 0;
+                Ok(ControlFlow::Continue(true))
+            }
+            None => {
+                *failed += 1;
+                if *failed >= MAX_FAILED_ESTIMATES {
+                    return Ok(ControlFlow::Break(EpisodeEnd::Lost));
+                }
+                Ok(ControlFlow::Continue(false))
+            }
+        }
+    }
+
+    /// How the episode ends before another push, if it does: out of pushes or time, or
+    /// (online learning) stopped for a newer gradient to plan the next push on.
+    fn out_of_budget_or_newer_gradient(&mut self, est: &Estimate) -> Option<EpisodeEnd> {
+        let config = self.run.config;
+        if self.pushes >= config.max_pushes {
+            return Some(EpisodeEnd::MaxPushes);
+        }
+        if self.run.elapsed() > config.max_sim_time_s {
+            return Some(EpisodeEnd::TimeLimit);
+        }
+        if matches!(self.brain, Brain::Gradient { .. })
+            && let Some(newer) = self.run.world.newer_gradient()
+        {
+            // Between two pushes: plan the next on the newer gradient (online learning).
+            self.trace(format_args!("a newer gradient: planning on it"));
+            self.resume = Some(*est);
+            self.newer = Some(newer);
+            return Some(EpisodeEnd::Done);
+        }
+        None
+    }
+
+    /// The next push: the planner's own, or the one a planner of another process chose;
+    /// `Break` when that one says the episode is done or gives up, or no push can be made.
+    fn choose_push(
+        &mut self,
+        est: &Estimate,
+    ) -> Result<ControlFlow<EpisodeEnd, PushOrder>, WorldStepError> {
+        let order = match self.ask_external(est)? {
+            ExternalPush::Internal => self.plan(est),
+            ExternalPush::Done => return Ok(ControlFlow::Break(EpisodeEnd::Done)),
+            ExternalPush::GiveUp => return Ok(ControlFlow::Break(EpisodeEnd::Lost)),
+            ExternalPush::Push {
+                contact_deg,
+                alpha_deg,
+                length_m,
+            } => {
+                let order = self.plan_external(est, contact_deg, alpha_deg, length_m);
+                if order.is_none() {
+                    self.trace(format_args!(
+                        "the push chosen ({contact_deg:.1} deg, alpha {alpha_deg:.1} deg) has no aim point or start"
+                    ));
+                }
+                order
+            }
+        };
+        Ok(match order {
+            Some(order) => ControlFlow::Continue(order),
+            None => ControlFlow::Break(EpisodeEnd::Lost),
+        })
+    }
+
+    /// Travels to the push's start and pushes; returns the estimate carried on by the push,
+    /// or, when the robot touched nothing, `est` with its position unknown (the object is
+    /// not where it says: find it again).
+    fn carry_out(
+        &mut self,
+        mut est: Estimate,
+        order: &PushOrder,
+    ) -> Result<Estimate, WorldStepError> {
+        let config = self.run.config;
+        self.push_longer = false;
+        let (target, _) = self.target(&est);
+        if (est.position() - target).length() <= 2.0 * config.tolerance_m {
+            self.near_pushes += 1;
+        }
+        self.trace(format_args!(
+            "plan from ({:.1}, {:.1}) mm {:.1} deg for {:.2} s, predicted {:?}",
+            order.start.x * 1e3,
+            order.start.y * 1e3,
+            order.start.theta.to_degrees(),
+            order.duration,
+            order
+                .prediction
+                .map(|p| (p.displacement * 1e3, p.rotation_rad.to_degrees()))
+        ));
+        let mut touched = false;
+        if self.run.travel(est.position(), order.orbit, order.start)? {
+            let pushed =
+                self.run
+                    .push(order.duration, order.orbit + 0.03, !order.retry, order.plan)?;
+            // The estimator carries its estimate on by the push on the first frame after
+            // it: read it once the robot is backing off.
+            self.run.backoff()?;
+            if let Some(done) = pushed {
+                touched = true;
+                self.pushes += 1;
+                est = self.update(est, done);
+                self.trace(format_args!(
+                    "pushed: estimate ({:.1}, {:.1}) mm {:.1} deg",
+                    est.pose.x * 1e3,
+                    est.pose.y * 1e3,
+                    est.pose.theta.to_degrees()
+                ));
+            }
+        }
+        if !touched {
+            self.trace(format_args!("no contact"));
+            // The object is not where the estimate says: find it again.
+            est.error_m = f64::INFINITY;
+        }
+        Ok(est)
     }
 
     /// Development aid: one line on stderr, with the object's true pose for comparison
