@@ -20,7 +20,13 @@ import json
 import struct
 import sys
 
-from mcap.reader import make_reader
+try:
+    from mcap.reader import make_reader
+except ModuleNotFoundError:
+    sys.exit(
+        "mcap_check: the `mcap` package is not installed: run tools/setup.sh and use "
+        ".venv-ci/bin/python tools/mcap_check.py (or: pip install mcap==1.6.0)"
+    )
 
 TOPICS = [
     "agp/ir_frames",

@@ -55,13 +55,28 @@ fn client() -> PathBuf {
     dir.join("client.cjs")
 }
 
-/// Runs the client against `url` until `requirements` are met; its JSON dump.
+/// Runs the client against `url` until `requirements` are met, offering the stock
+/// client's own subprotocol (`foxglove.websocket.v1`); its JSON dump.
 #[track_caller]
 fn receive(url: &str, requirements: &[&str], min_s: f64) -> Value {
+    receive_offering(url, requirements, min_s, None)
+}
+
+/// [`receive`], offering `subprotocol` instead of the client's default when given.
+#[track_caller]
+fn receive_offering(
+    url: &str,
+    requirements: &[&str],
+    min_s: f64,
+    subprotocol: Option<&str>,
+) -> Value {
     let mut cmd = Command::new("node");
     cmd.arg(client())
         .args(["--url", url, "--timeout-s", &TIMEOUT.as_secs().to_string()])
         .args(["--min-s", &min_s.to_string()]);
+    if let Some(name) = subprotocol {
+        cmd.args(["--subprotocol", name]);
+    }
     for r in requirements {
         let flag = if r.contains(':') {
             "--require-entity"
@@ -121,6 +136,17 @@ fn launch(instance: &str, ag: &Path) -> String {
     )
 }
 
+/// Every topic of `agp view` (agp_view::topics::ALL).
+const VIEW_TOPICS: [&str; 7] = [
+    "/robot",
+    "/ir",
+    "/estimate",
+    "/goal",
+    "/tf",
+    "/ag/grid",
+    "/ag/image",
+];
+
 /// The scene topics the live view publishes from its first frame on.
 const SCENE: [&str; 7] = [
     "/robot",
@@ -144,8 +170,11 @@ fn a_stock_foxglove_client_receives_the_live_scene_of_a_pipeline_and_its_goal() 
     let url = url_in(&serving[0]);
     up.wait_for_lines("serving the goals", 1, TIMEOUT);
 
-    // Idle, wheels stopped: the robot where the scenario starts it.
+    // Idle, wheels stopped: the robot where the scenario starts it. The client offers its
+    // default subprotocol, the protocol's original name, as Lichtblick does.
     let dump = receive(&url, &SCENE, 0.0);
+    assert_eq!(dump["offered"], "foxglove.websocket.v1", "{dump:#}");
+    assert_eq!(dump["subprotocol"], "foxglove.websocket.v1", "{dump:#}");
     let scenario = Scenario::builtin("triangle").expect("the triangle");
     let start = scenario.robot.start;
     let robot = &dump["entities"]["/robot"]["robot"];
@@ -241,6 +270,23 @@ fn a_stock_foxglove_client_receives_the_live_scene_of_a_pipeline_and_its_goal() 
         "the object estimated at ({ox}, {oy}) mm, {off} mm off its way from {from} to {to}"
     );
     println!("live view, with a goal:\n{dump:#}");
+    // Every channel the view advertises had messages, on the stock client's default
+    // subprotocol.
+    let advertised: Vec<&str> = dump["channels"]
+        .as_array()
+        .expect("channels")
+        .iter()
+        .filter_map(|c| c["topic"].as_str())
+        .collect();
+    assert_eq!(advertised.len(), VIEW_TOPICS.len(), "{advertised:?}");
+    for topic in VIEW_TOPICS {
+        let count = dump["topics"][topic]["count"].as_u64().unwrap_or(0);
+        assert!(count > 0, "no message on {topic}: {dump:#}");
+        println!(
+            "stock client ({}): {topic}: {count} messages",
+            dump["subprotocol"]
+        );
+    }
 
     let down = run_agp(dir.path(), &["down", "--instance", &name], TIMEOUT);
     assert!(down.status.success(), "{}", down.stderr);
@@ -371,8 +417,9 @@ fn a_stock_foxglove_client_receives_a_recording_served_by_agp_view_paced_by_its_
     let serving = view.wait_for_lines("agp view: serving", 1, TIMEOUT);
     let url = url_in(&serving[0]);
     assert!(client.is_file());
-    // 1 s of log time: the client stays until past its end, and sees the last scene.
-    let dump = receive(
+    // 1 s of log time: the client stays until past its end, and sees the last scene. It
+    // offers the SDK's name for the protocol, which the view still takes.
+    let dump = receive_offering(
         &url,
         &[
             "/robot:robot",
@@ -381,7 +428,9 @@ fn a_stock_foxglove_client_receives_a_recording_served_by_agp_view_paced_by_its_
             "/ag/grid",
         ],
         1.5,
+        Some("foxglove.sdk.v1"),
     );
+    assert_eq!(dump["subprotocol"], "foxglove.sdk.v1", "{dump:#}");
     let (x, y, _) = pose_of(&dump["entities"]["/robot"]["robot"]);
     assert!((x - 100.0).abs() < 1e-6 && y.abs() < 1e-6, "({x}, {y}) mm");
     let object = &dump["entities"]["/estimate"]["object_estimate"];

@@ -156,9 +156,22 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
     let rec = Recording::open(&dir.path().join("run.mcap")).expect("a readable recording");
 
     // The file: every topic a channel, named by its service, its schema by the payload's
-    // iceoryx2 type name.
+    // iceoryx2 type name; beside them the scene in Foxglove's schemas (tests/foxglove_recording.rs).
     assert!(!rec.truncated, "the recorder completed the file");
-    assert_eq!(rec.channels.len(), TOPIC_COUNT);
+    let raw = rec
+        .channels
+        .iter()
+        .filter(|c| c.message_encoding == "agp-repr-c")
+        .count();
+    assert_eq!(raw, TOPIC_COUNT);
+    assert!(
+        rec.channels
+            .iter()
+            .filter(|c| c.message_encoding != "agp-repr-c")
+            .all(|c| c.message_encoding == "protobuf" && c.schema_name.starts_with("foxglove.")),
+        "{:?}",
+        rec.channels
+    );
     for t in recorded_topics() {
         let c = rec
             .channel(t.service)

@@ -9,14 +9,16 @@
 //
 //   node client.cjs --url ws://127.0.0.1:8765 [--timeout-s 60] [--min-s 0]
 //                   [--require /robot ...] [--require-entity /estimate:object_estimate ...]
+//                   [--subprotocol NAME]
 //
 // Exit status: 0 when every requirement was met, 1 when not (the JSON says what is
 // missing), 2 on bad arguments.
 //
-// The ws-protocol package names the protocol's old subprotocol ("foxglove.websocket.v1");
-// the foxglove SDK's server (agp view) speaks the same protocol as "foxglove.sdk.v1",
-// so this client offers that name to the WebSocket it hands FoxgloveClient (the package
-// takes any WebSocket the caller opens).
+// It offers the package's own subprotocol, `FoxgloveClient.SUPPORTED_SUBPROTOCOL`
+// ("foxglove.websocket.v1", the protocol's original name, which Lichtblick and older Foxglove
+// releases offer too), as a stock client does; `--subprotocol NAME` offers another
+// (`foxglove.sdk.v1`, the SDK's name for the same protocol). The dump's `subprotocol` is
+// the one the server chose.
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -25,7 +27,14 @@ const protobuf = require("protobufjs");
 const { FileDescriptorSet } = require("protobufjs/ext/descriptor");
 
 function parseArgs(argv) {
-  const out = { url: "ws://127.0.0.1:8765", timeoutS: 60, minS: 0, require: [], requireEntity: [] };
+  const out = {
+    url: "ws://127.0.0.1:8765",
+    timeoutS: 60,
+    minS: 0,
+    require: [],
+    requireEntity: [],
+    subprotocol: FoxgloveClient.SUPPORTED_SUBPROTOCOL,
+  };
   for (let i = 0; i < argv.length; i++) {
     const a = argv[i];
     const next = () => {
@@ -40,6 +49,7 @@ function parseArgs(argv) {
     else if (a === "--min-s") out.minS = Number(next());
     else if (a === "--require") out.require.push(next());
     else if (a === "--require-entity") out.requireEntity.push(next());
+    else if (a === "--subprotocol") out.subprotocol = next();
     else {
       console.error(`foxglove-client: unknown argument ${a}`);
       process.exit(2);
@@ -108,6 +118,7 @@ function finish(reason) {
   const m = missing();
   const dump = {
     url: args.url,
+    offered: args.subprotocol,
     subprotocol,
     server: serverInfo && { name: serverInfo.name, capabilities: serverInfo.capabilities },
     seconds: (Date.now() - started) / 1000,
@@ -122,7 +133,7 @@ function finish(reason) {
   process.stdout.write(JSON.stringify(dump, null, 1) + "\n", () => process.exit(m.length === 0 ? 0 : 1));
 }
 
-const ws = new WebSocket(args.url, ["foxglove.sdk.v1"]);
+const ws = new WebSocket(args.url, [args.subprotocol]);
 const client = new FoxgloveClient({ ws });
 const timer = setTimeout(() => finish("timeout"), args.timeoutS * 1000);
 

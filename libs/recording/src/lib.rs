@@ -14,6 +14,8 @@
 //!   with [`payload_from_bytes`] (or [`grid_from_bytes`] for the 64 KiB grids). `log_time`:
 //!   Unix ns when the recorder took the message; `publish_time`: the payload's own publish
 //!   stamp (moved from CLOCK_MONOTONIC to Unix time) where it has one, else the log time.
+//! - Channels a [`Tap`] adds beside these, from the recorded messages (`agp record` adds
+//!   the scene in Foxglove's protobuf schemas: agp-view's `FoxgloveTap`).
 //! - Metadata [`RUN_METADATA`] ([`RunInfo`]: version, instance, scenario, clock, seed,
 //!   launch file) and, once the recorder finished, [`RECORDING_METADATA`] (per topic
 //!   `received`, `written`, `dropped`, `lost`).
@@ -28,6 +30,7 @@ mod layout;
 mod reader;
 mod recorder;
 mod replay;
+mod tap;
 mod topics;
 
 use std::collections::BTreeMap;
@@ -37,6 +40,7 @@ pub use mcap;
 pub use reader::{ChannelInfo, MAX_RECORDING_BYTES, ReadError, Recording};
 pub use recorder::{RecordError, RecordStats, Recorder, RecorderOptions, TopicStats};
 pub use replay::{ReplayAction, ReplayError, ReplayScript, same_sensing};
+pub use tap::{McapFile, Tap};
 pub use topics::{
     Plain, TOPIC_COUNT, TopicSpec, grid_from_bytes, payload_from_bytes, recorded_topics,
 };

@@ -177,6 +177,11 @@ impl Recording {
             .filter(move |m| m.channel.topic == topic))
     }
 
+    /// The file's bytes, as read.
+    pub fn bytes(&self) -> &[u8] {
+        &self.data
+    }
+
     pub fn path(&self) -> &Path {
         &self.path
     }

@@ -29,6 +29,7 @@ use agp_shared_types::{
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{Node, ZeroCopySend};
 
+use crate::tap::Tap;
 use crate::topics::{TOPIC_COUNT, TopicSpec, bytes_of, recorded_topics};
 use crate::{MESSAGE_ENCODING, RECORDING_METADATA, RUN_METADATA, SCHEMA_ENCODING};
 
@@ -158,6 +159,17 @@ impl Recorder {
         path: &Path,
         options: RecorderOptions,
     ) -> Result<Self, RecordError> {
+        Self::start_with_tap(instance, path, options, None)
+    }
+
+    /// [`Recorder::start`], with `tap` adding channels derived from the recorded messages
+    /// (see [`Tap`]): it runs on the writing thread, never on the draining one.
+    pub fn start_with_tap(
+        instance: &Instance,
+        path: &Path,
+        options: RecorderOptions,
+        tap: Option<Box<dyn Tap>>,
+    ) -> Result<Self, RecordError> {
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let batches = options.batches.max(2);
@@ -212,7 +224,7 @@ impl Recorder {
         let counters = Arc::clone(&rec.counters);
         match std::thread::Builder::new()
             .name("agp-rec-write".into())
-            .spawn(move || write_loop(file, &options, &full_rx, &free_tx, &counters))
+            .spawn(move || write_loop(file, &options, &full_rx, &free_tx, &counters, tap))
         {
             Ok(w) => rec.writer = Some(w),
             Err(_) => {
@@ -625,6 +637,7 @@ fn write_loop(
     full: &Receiver<Vec<u8>>,
     free: &SyncSender<Vec<u8>>,
     counters: &Counters,
+    mut tap: Option<Box<dyn Tap>>,
 ) -> Result<u64, RecordError> {
     let write_options = mcap::WriteOptions::new()
         .profile("agp")
@@ -655,6 +668,9 @@ fn write_loop(
         ]);
         channels[i] = out.add_channel(schema, t.service, MESSAGE_ENCODING, &meta)?;
     }
+    if let Some(tap) = tap.as_mut() {
+        tap.begin(&mut out)?;
+    }
     let mut sequence = [0u32; TOPIC_COUNT];
     let mut failure = None;
     while let Ok(mut batch) = full.recv() {
@@ -680,6 +696,12 @@ fn write_loop(
                     break;
                 }
                 counters.written[topic].fetch_add(1, Ordering::Relaxed);
+                if let Some(tap) = tap.as_mut()
+                    && let Err(e) = tap.message(&mut out, topics[topic].service, data, log)
+                {
+                    failure = Some(e);
+                    break;
+                }
             }
         }
         batch.clear();
@@ -707,6 +729,9 @@ fn write_loop(
         name: RECORDING_METADATA.into(),
         metadata: stats,
     })?;
+    if let Some(tap) = tap.as_mut() {
+        tap.end(&mut out)?;
+    }
     out.finish()?;
     let file = out.into_inner();
     let file = file.into_inner().map_err(|e| RecordError::Create {

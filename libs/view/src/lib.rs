@@ -6,7 +6,9 @@
 //! - [`serve_instance`] subscribes to a running instance (a node of its own, reading the
 //!   estimates, IR frames, grids, task and goal; never ground truth) and publishes the
 //!   latest of each at [`ViewOptions::rate_hz`];
-//! - [`serve_recording`] does the same from an MCAP recording, paced by its log times.
+//! - [`serve_recording`] does the same from an MCAP recording, paced by its log times;
+//! - [`FoxgloveTap`] writes the same scene into a recording, in Foxglove's protobuf
+//!   schemas (`agp record`, `agp export`), so the field's own tools open it.
 //!
 //! What each topic shows: [`topics`] and the `scene` functions. The object's polygon is
 //! ground truth and never reaches the view: the object is drawn as the border learned from
@@ -18,6 +20,7 @@ mod replay;
 mod scene;
 mod server;
 mod state;
+mod tap;
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -28,6 +31,7 @@ pub use replay::{MAX_RECORD_BYTES, open_recording, serve_recording};
 pub use scene::{GOAL_FRAME, GRID_FIELDS, OBJECT_FRAME, ROBOT_FRAME, WORLD_FRAME};
 pub use server::{Viewer, topics};
 pub use state::{AgLayer, GoalView, ViewState};
+pub use tap::{FOXGLOVE_METADATA, FoxgloveTap, SCENE_RATE_HZ, channels};
 
 /// Foxglove's default WebSocket port.
 pub const DEFAULT_PORT: u16 = 8765;

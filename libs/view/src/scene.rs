@@ -11,9 +11,10 @@ use agp_world::RobotDescription;
 use foxglove::bytes::Bytes;
 use foxglove::messages::{
     ArrowPrimitive, Color, CylinderPrimitive, FrameTransform, FrameTransforms, Grid, LinePrimitive,
-    PackedElementField, Point3, Pose, Quaternion, RawImage, SceneEntity, SceneEntityDeletion,
-    SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp, TriangleListPrimitive, Vector2,
-    Vector3, line_primitive, packed_element_field, scene_entity_deletion,
+    Log, PackedElementField, Point3, PointCloud, Pose, PoseInFrame, Quaternion, RawImage,
+    SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp,
+    TriangleListPrimitive, Vector2, Vector3, line_primitive, log, packed_element_field,
+    scene_entity_deletion,
 };
 use glam::DVec2;
 
@@ -502,6 +503,150 @@ pub fn transforms(e: Option<&ObjectEstimate>, goal: Option<&GoalView>, ts: u64) 
         transforms.push(transform(GOAL_FRAME, &g.task.goal, ts));
     }
     FrameTransforms { transforms }
+}
+
+/// `/robot/pose`, `/estimate/pose`: a pose in the `world` frame, as Foxglove's
+/// `PoseInFrame` (Rerun draws it as a transform).
+pub fn pose_in_world(p: &Pose2, ts: u64) -> PoseInFrame {
+    PoseInFrame {
+        timestamp: Some(timestamp(ts)),
+        frame_id: WORLD_FRAME.to_owned(),
+        pose: Some(pose_at(p.position(), 0.0, p.theta)),
+    }
+}
+
+/// Bytes of one point of the point clouds: x, y, z (f32), red, green, blue, alpha (u8).
+const POINT_STRIDE: usize = 16;
+
+/// Appends a point of colour `rgba` (0-255) to a point cloud's data.
+fn push_point(data: &mut Vec<u8>, p: DVec2, z: f64, rgba: [u8; 4]) {
+    for v in [p.x as f32, p.y as f32, z as f32] {
+        data.extend_from_slice(&v.to_le_bytes());
+    }
+    data.extend_from_slice(&rgba);
+}
+
+/// A point cloud in the `world` frame of points packed by [`push_point`].
+fn point_cloud(data: Vec<u8>, ts: u64) -> PointCloud {
+    use packed_element_field::NumericType;
+    let field = |name: &str, offset: u32, ty: NumericType| PackedElementField {
+        name: name.to_owned(),
+        offset,
+        r#type: ty as i32,
+    };
+    PointCloud {
+        timestamp: Some(timestamp(ts)),
+        frame_id: WORLD_FRAME.to_owned(),
+        pose: Some(identity()),
+        point_stride: POINT_STRIDE as u32,
+        fields: vec![
+            field("x", 0, NumericType::Float32),
+            field("y", 4, NumericType::Float32),
+            field("z", 8, NumericType::Float32),
+            field("red", 12, NumericType::Uint8),
+            field("green", 13, NumericType::Uint8),
+            field("blue", 14, NumericType::Uint8),
+            field("alpha", 15, NumericType::Uint8),
+        ],
+        data: Bytes::from(data),
+    }
+}
+
+/// The object's colour in the point clouds (the `/estimate` scene's green).
+pub const OBJECT_RGBA: [u8; 4] = [51, 230, 102, 255];
+/// The robot's colour in the point clouds (the `/robot` scene's blue, out of contact).
+pub const ROBOT_RGBA: [u8; 4] = [77, 128, 217, 255];
+/// An IR ray that sees something, in the point clouds (the `/ir` scene's red).
+pub const IR_HIT_RGBA: [u8; 4] = [255, 51, 51, 255];
+/// An IR ray that sees nothing, in the point clouds.
+pub const IR_MISS_RGBA: [u8; 4] = [178, 178, 178, 120];
+
+/// Points every this far (m) along the rays of a filled point cloud.
+const FILL_STEP_M: f64 = 0.002;
+
+/// `/estimate/points`: the object as the estimator believes it, as points a viewer without
+/// scene entities draws (Rerun): the learned border at the estimated pose, filled by
+/// points along the rays from the estimated position to it (a disc of the object's radius
+/// without a border). Empty while the estimate is not valid.
+pub fn estimate_points(e: &ObjectEstimate, border: Option<&[DVec2]>, ts: u64) -> PointCloud {
+    let mut data = Vec::new();
+    if e.valid == 1 {
+        let pose = e.pose;
+        let ring;
+        let rim: &[DVec2] = match border {
+            Some(b) => b,
+            None => {
+                let r = e.object_radius_m.clamp(0.01, 0.5);
+                ring = (0..90)
+                    .map(|k| r * DVec2::from_angle(std::f64::consts::TAU * f64::from(k) / 90.0))
+                    .collect::<Vec<_>>();
+                &ring
+            }
+        };
+        for b in rim {
+            let n = (b.length() / FILL_STEP_M).ceil().max(1.0) as usize;
+            for k in 1..=n {
+                let local = *b * (k as f64 / n as f64);
+                push_point(&mut data, pose.to_world(local), 0.004, OBJECT_RGBA);
+            }
+        }
+    }
+    point_cloud(data, ts)
+}
+
+/// `/robot/points`: the robot's body as a filled disc of points at its estimated pose.
+pub fn robot_points(robot: &RobotDescription, e: &ObjectEstimate, ts: u64) -> PointCloud {
+    let mut data = Vec::new();
+    let r = robot.body_radius;
+    let rings = (r / FILL_STEP_M).ceil().max(1.0) as usize;
+    for j in 1..=rings {
+        let radius = r * j as f64 / rings as f64;
+        let n = (std::f64::consts::TAU * radius / FILL_STEP_M)
+            .ceil()
+            .max(6.0) as usize;
+        for k in 0..n {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            let local = radius * DVec2::from_angle(a);
+            push_point(&mut data, e.robot.to_world(local), 0.05, ROBOT_RGBA);
+        }
+    }
+    point_cloud(data, ts)
+}
+
+/// `/ir/points`: each IR ray of [`ir_scene`] as points every 2 mm from its mount, red when
+/// it sees something, faint grey when not.
+pub fn ir_points(
+    robot: &RobotDescription,
+    robot_pose: &Pose2,
+    ir_raw: &[f32],
+    ts: u64,
+) -> PointCloud {
+    let mut data = Vec::new();
+    for (sensor, &raw) in robot.ir_sensors.iter().zip(ir_raw) {
+        let (len, color) = match robot.response.distance(f64::from(raw)) {
+            Some(d) => (d, IR_HIT_RGBA),
+            None => (robot.response.max_range(), IR_MISS_RGBA),
+        };
+        let n = (len / FILL_STEP_M).ceil().max(1.0) as usize;
+        for k in 0..=n {
+            let local = sensor.mount + (len * k as f64 / n as f64) * sensor.direction();
+            push_point(&mut data, robot_pose.to_world(local), 0.02, color);
+        }
+    }
+    point_cloud(data, ts)
+}
+
+/// `/log`: one line of what a process said on the ring, from `name` (`planner`,
+/// `estimator`, `supervisor`, `physics`).
+pub fn log_line(name: &str, message: String, ts: u64) -> Log {
+    Log {
+        timestamp: Some(timestamp(ts)),
+        level: log::Level::Info as i32,
+        message,
+        name: name.to_owned(),
+        file: String::new(),
+        line: 0,
+    }
 }
 
 /// The fields of each cell of `/ag/grid`, in order, all f32.

@@ -7,6 +7,7 @@ use agp_harness::{
 mod bridge;
 mod control;
 mod control_plane;
+mod export;
 mod goals;
 mod profile;
 mod rates;
@@ -97,6 +98,11 @@ enum Cmd {
     ///
     /// Example: agp record --instance live --seconds 10 live.mcap
     Record(record::RecordArgs),
+    /// Add the scene in Foxglove's protobuf schemas (what `agp record` now writes beside
+    /// the raw channels) to a recording made before: IN is copied to OUT with them.
+    ///
+    /// Example: agp export old.mcap old-foxglove.mcap
+    Export(export::ExportArgs),
     /// Play a recorded lockstep run back into physics (its scenario, seed and clock, from
     /// the recording) and check it comes out the same: every recorded frame to the bit, and
     /// the object's final true pose.
@@ -299,6 +305,7 @@ fn main() -> ExitCode {
         Cmd::Goal(args) => goal(args),
         Cmd::Profile(args) => profile::run(args),
         Cmd::Record(args) => record::run(args),
+        Cmd::Export(args) => export::run(args),
         Cmd::Replay(args) => replay::run(args),
         Cmd::Bridge(args) => bridge::run(args),
         Cmd::ReplayDriver(args) => replay::drive(args),

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use agp_recording::{RecordStats, Recorder, RecorderOptions, RunInfo};
+use agp_shared_types::{ControlKind, read_str};
 use anyhow::{Context, Result, bail};
 
 /// `agp record`.
@@ -57,7 +58,10 @@ pub(crate) fn run(args: &RecordArgs) -> Result<u8> {
         run: info.to_metadata(),
         ..RecorderOptions::default()
     };
-    let recorder = Recorder::start(&instance, &args.file, options)
+    // The scene in Foxglove's schemas beside the raw channels, built on the recorder's
+    // writing thread (agp-view's tap), never on the ring.
+    let tap = Box::new(agp_view::FoxgloveTap::default());
+    let recorder = Recorder::start_with_tap(&instance, &args.file, options, Some(tap))
         .with_context(|| format!("cannot record instance `{}`", args.instance))?;
     println!(
         "agp: recording instance `{}` into {}{}",
@@ -92,20 +96,90 @@ pub(crate) fn run(args: &RecordArgs) -> Result<u8> {
     Ok(0)
 }
 
-/// What the recording keeps of the run.
+/// What the run's supervisor says of it: the scenario, clock and rate it gave physics (the
+/// `AGP_SCENARIO`, `AGP_CLOCK`, `AGP_RATE_HZ` of the physics process it started) and
+/// physics's `--seed`.
+#[derive(Debug, Default, PartialEq)]
+struct SupervisedRun {
+    scenario: Option<String>,
+    clock: Option<String>,
+    rate_hz: Option<f64>,
+    seed: Option<u64>,
+}
+
+impl SupervisedRun {
+    /// Asks the instance's supervisor for its processes and reads its physics process's
+    /// environment and arguments (`/proc/PID/environ`, `/proc/PID/cmdline`: same user).
+    /// Empty when there is no supervisor or no physics process it started.
+    fn ask(instance: &str) -> Self {
+        let Ok(status) = agp_runtime::control_client::ask(instance, ControlKind::Status) else {
+            return Self::default();
+        };
+        let count = (status.process_count as usize).min(status.processes.len());
+        let Some(physics) = status.processes[..count].iter().find(|p| {
+            p.pid != 0
+                && (read_str(&p.name) == "physics" || read_str(&p.exec).ends_with("agp-physics"))
+        }) else {
+            return Self::default();
+        };
+        let read = |what: &str| std::fs::read(format!("/proc/{}/{what}", physics.pid)).ok();
+        Self::parse(
+            read("environ").as_deref().unwrap_or_default(),
+            read("cmdline").as_deref().unwrap_or_default(),
+        )
+    }
+
+    /// From a process's NUL-separated environment and command line.
+    fn parse(environ: &[u8], cmdline: &[u8]) -> Self {
+        let words = |b: &[u8]| -> Vec<String> {
+            b.split(|c| *c == 0)
+                .filter(|w| !w.is_empty())
+                .map(|w| String::from_utf8_lossy(w).into_owned())
+                .collect()
+        };
+        let env = words(environ);
+        let get = |key: &str| {
+            env.iter()
+                .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('=').map(str::to_owned))
+                .filter(|v| !v.is_empty())
+        };
+        let args = words(cmdline);
+        let seed = args.iter().enumerate().find_map(|(i, a)| {
+            if a == "--seed" {
+                args.get(i + 1)?.parse().ok()
+            } else {
+                a.strip_prefix("--seed=")?.parse().ok()
+            }
+        });
+        Self {
+            scenario: get("AGP_SCENARIO"),
+            clock: get("AGP_CLOCK"),
+            rate_hz: get("AGP_RATE_HZ").and_then(|r| r.parse().ok()),
+            seed,
+        }
+    }
+}
+
+/// What the recording keeps of the run: what the arguments say, else what the run's
+/// supervisor says (an `agp record --instance NAME` of a run started apart).
 fn run_info(args: &RecordArgs) -> Result<RunInfo> {
     let read = |p: &std::path::Path| {
         agp_world::read_regular_text(p, agp_world::MAX_CONFIG_FILE_BYTES)
             .with_context(|| format!("cannot read {}", p.display()))
     };
-    let scenario = args.scenario.clone().unwrap_or_default();
+    let asked = if args.scenario.is_none() || args.clock.is_none() || args.seed.is_none() {
+        SupervisedRun::ask(&args.instance)
+    } else {
+        SupervisedRun::default()
+    };
+    let scenario = args.scenario.clone().or(asked.scenario).unwrap_or_default();
     let is_file = !scenario.is_empty() && !agp_world::BUILTIN_NAMES.contains(&scenario.as_str());
     let scenario_toml = if is_file {
         Some(read(std::path::Path::new(&scenario))?)
     } else {
         None
     };
-    let seed = match args.seed {
+    let seed = match args.seed.or(asked.seed) {
         Some(s) => Some(s),
         None if !scenario.is_empty() => Some(
             agp_world::Scenario::resolve(&scenario)
@@ -121,8 +195,8 @@ fn run_info(args: &RecordArgs) -> Result<RunInfo> {
         instance: args.instance.clone(),
         scenario,
         scenario_toml,
-        clock: args.clock.clone().unwrap_or_default(),
-        rate_hz: args.rate_hz,
+        clock: args.clock.clone().or(asked.clock).unwrap_or_default(),
+        rate_hz: args.rate_hz.or(asked.rate_hz),
         seed,
         launch_file: args.launch.as_ref().map(|p| p.display().to_string()),
         launch_toml,
@@ -179,4 +253,26 @@ fn stats_json(stats: &RecordStats) -> serde_json::Value {
             "lost": t.lost,
         })).collect::<Vec<_>>(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_run_is_read_from_physicss_environment_and_its_seed_argument() {
+        let environ = b"PATH=/bin\0AGP_SCENARIO=triangle\0AGP_CLOCK=lockstep\0AGP_RATE_HZ=640\0";
+        let cmdline = b"/x/agp-physics\0--seed\x007\0";
+        assert_eq!(
+            SupervisedRun::parse(environ, cmdline),
+            SupervisedRun {
+                scenario: Some("triangle".into()),
+                clock: Some("lockstep".into()),
+                rate_hz: Some(640.0),
+                seed: Some(7),
+            }
+        );
+        let none = SupervisedRun::parse(b"AGP_SCENARIO=\0", b"agp-physics\0--seed=3\0");
+        assert_eq!((none.scenario, none.seed), (None, Some(3)));
+    }
 }
