@@ -9,14 +9,15 @@ loads the file; prints each entity it made and its components (Rerun converts Fo
 PointCloud, PoseInFrame, FrameTransforms, Grid-less), and writes the .rrd. Exit 1 when the
 robot, the object or the IR did not become an entity with points.
 
-`browser`: the recording's last half second as an .rrd, with a blueprint whose 3D view
+`browser`: the recording's last scene as an .rrd, with a blueprint whose 3D view
 looks straight down (+x right, +y up) at the object's last estimated position; Rerun's web
 viewer (`rerun --web-viewer`, served from the wheel, no network) on it, opened in Debian's
 headless Chromium by tools/foxglove-client/screenshot.cjs (puppeteer-core); then the PNG is
 read back (a small PNG reader below, no package) and checked: the object's green
-(agp_view's OBJECT_RGBA) covers pixels round the view's centre, where the camera puts the
-object, and the robot's blue lies on the side of the object where the recording puts the
-robot. Exit 1 when not.
+(agp_view's OBJECT_RGBA) is in the picture, near the view's centre where the camera looks,
+and its centroid lies where the recording puts the object relative to the robot's blue
+disc (whose width gives the picture's scale), within 10 px + 15 % of their distance.
+Exit 1 when not.
 """
 
 import argparse
@@ -48,6 +49,8 @@ APP_ID = "agp"
 OBJECT_RGB = (51, 230, 102)
 ROBOT_RGB = (77, 128, 217)
 POINT_ENTITIES = ["/robot/points", "/estimate/points", "/ir/points"]
+# The E-puck's body radius (agp_world::RobotDescription::epuck().body_radius), m.
+ROBOT_BODY_RADIUS_M = 0.037
 
 
 def reader(path, start_time_ns=None):
@@ -76,11 +79,11 @@ def entities_of(path):
                 if pos and (chunk.entity_path not in last_time or when >= last_time[chunk.entity_path]):
                     last_time[chunk.entity_path] = when
                     last_points[chunk.entity_path] = pos
-    return {k: sorted(v) for k, v in sorted(found.items())}, last_points
+    return {k: sorted(v) for k, v in sorted(found.items())}, last_points, last_time
 
 
 def cmd_entities(args):
-    entities, last = entities_of(args.file)
+    entities, last, _ = entities_of(args.file)
     print(f"Rerun {rr.__version__}: {len(entities)} entities from {args.file}")
     for path, cols in entities.items():
         print(f"  {path:<22} {', '.join(cols)}")
@@ -175,11 +178,12 @@ def free_port():
 def cmd_browser(args):
     work = args.keep or tempfile.mkdtemp(prefix="agp-rerun-")
     os.makedirs(work, exist_ok=True)
-    t0, t1 = reader(args.file).time_bounds()
-    start = max(t0, t1 - 500_000_000)
+    # The last scene only (every scene channel is written at one log time): whatever time
+    # the viewer shows once it has loaded, it shows the recording's end.
+    _, last, last_time = entities_of(args.file)
+    start = min(last_time[p] for p in POINT_ENTITIES)
     rrd = os.path.join(work, "end.rrd")
     reader(args.file, start_time_ns=start).stream().write_rrd(rrd, application_id=APP_ID, recording_id="agp-end")
-    _, last = entities_of(args.file)
     obj = np.array(last["/estimate/points"], dtype=float)[:, :2]
     robot = np.array(last["/robot/points"], dtype=float)[:, :2]
     oc, rc = obj.mean(axis=0), robot.mean(axis=0)
@@ -250,25 +254,35 @@ def cmd_browser(args):
         gy, gx = np.nonzero(green)
         g = np.array([gx.mean(), gy.mean()])
         result["green_centroid_px"] = g.round(1).tolist()
-        # The camera looks down at the object: it is drawn round the view's centre.
+        # The camera looks straight down at the object's last estimated position; Rerun
+        # does not always centre it exactly (seen 0.14 of the height off), so the region
+        # is checked against the robot drawn beside it: the robot's blue disc gives the
+        # scale (its width is the body's diameter), and the object's green must lie where
+        # the recording puts it relative to the robot.
         centre = np.array([w / 2, h / 2])
         off = np.abs(g - centre) / np.array([w, h])
         result["green_off_centre"] = off.round(3).tolist()
-        if (off > 0.15).any():
+        if (off > 0.3).any():
             ok = False
-            result["why"] = "the object's green is not where the recording puts it (the view's centre)"
-        if blue.sum() >= 50:
+            result["why"] = "the object's green is not round the view's centre, where the camera looks"
+        if blue.sum() < 50:
+            ok = False
+            result["why"] = "the robot's blue is not in the picture"
+        else:
             by, bx = np.nonzero(blue)
             b = np.array([bx.mean(), by.mean()])
             result["blue_centroid_px"] = b.round(1).tolist()
+            px_per_m = (bx.max() - bx.min()) / (2 * ROBOT_BODY_RADIUS_M)
             # +x right, +y up: the image's rows grow downwards.
-            seen = np.array([b[0] - g[0], -(b[1] - g[1])])
-            world = rc - oc
-            cos = float(seen @ world / (np.linalg.norm(seen) * np.linalg.norm(world) + 1e-12))
-            result["robot_direction_cos"] = round(cos, 3)
-            if cos < 0.7:
+            expected = b + px_per_m * np.array([oc[0] - rc[0], -(oc[1] - rc[1])])
+            err = float(np.linalg.norm(g - expected))
+            dist = float(np.linalg.norm(expected - b))
+            result["px_per_m"] = round(float(px_per_m), 1)
+            result["green_expected_px"] = expected.round(1).tolist()
+            result["green_error_px"] = round(err, 1)
+            if err > 10 + 0.15 * dist:
                 ok = False
-                result["why"] = "the robot's blue is not on the side of the object the recording puts it"
+                result["why"] = "the object's green is not where the recording puts it beside the robot"
     print(json.dumps(result))
     if not ok:
         print(f"rerun_check: {result['why']}", file=sys.stderr)
