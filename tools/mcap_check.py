@@ -90,6 +90,11 @@ def main():
         n = counts.get(topic, 0)
         print(f"{topic:<20} {s.name:<24} {c.message_encoding:<11} {sizes.get(topic, 0):>6} {n:>9} "
               f"{n / span if span else 0:>8.1f} {rec.get(topic + '.dropped', '?'):>8} {rec.get(topic + '.lost', '?'):>6}")
+    foxglove = sorted((c.topic, schemas[c.schema_id].name) for c in channels.values()
+                      if c.message_encoding == "protobuf" and c.schema_id in schemas)
+    if foxglove:
+        print(f"{len(foxglove)} Foxglove channels (protobuf; decode them with tools/foxglove_decode.py): "
+              + ", ".join(f"{t} {n} ({counts.get(t, 0)})" for t, n in foxglove))
     if steps:
         gaps = sum(max(0, b - a - 1) for a, b in zip(steps, steps[1:]))
         print(f"IR frames: steps {steps[0]} .. {steps[-1]} ({steps[-1] - steps[0] + 1} steps), {gaps} missing in between")
