@@ -12,7 +12,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc::{self, Receiver};
 use std::time::{Duration, Instant};
 
-use agp_tests::{bin_path, learned_ag, process_is_gone};
+use agp_tests::{bin_path, learned_ag, process_is_gone, run_agp};
 use serde_json::Value;
 
 /// Safety net of every wait: an episode takes seconds.
@@ -33,15 +33,14 @@ struct Bench {
     child: Child,
     lines: Receiver<String>,
     seen: Vec<String>,
-    dir: tempfile::TempDir,
+    dir: PathBuf,
 }
 
 impl Bench {
     /// `agp bench place` of the triangle over the pipeline (two planners, many episodes: it
     /// is stopped long before the end), leader of its own process group, its JSON to
     /// `place.json`.
-    fn start() -> Self {
-        let dir = tempfile::tempdir().expect("a temporary folder");
+    fn start(dir: &Path) -> Self {
         let ag = learned_ag("triangle");
         let mut child = Command::new(bin_path("agp"))
             .args([
@@ -55,7 +54,7 @@ impl Bench {
             .args(["--seed", "5", "--planners", "affordance,baseline", "--ag"])
             .arg(&ag)
             .args(["--json", "place.json"])
-            .current_dir(dir.path())
+            .current_dir(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
@@ -76,7 +75,7 @@ impl Bench {
             child,
             lines,
             seen: Vec::new(),
-            dir,
+            dir: dir.to_path_buf(),
         }
     }
 
@@ -85,7 +84,7 @@ impl Bench {
     }
 
     fn json_path(&self) -> PathBuf {
-        self.dir.path().join("place.json")
+        self.dir.join("place.json")
     }
 
     /// Waits until a line of stderr holds `needle` (at most [`TIMEOUT`]).
@@ -216,9 +215,14 @@ fn episodes_in(doc: &Value) -> u64 {
 
 /// Stops a bench during its placements with `signals` (each sent once the bench reacted
 /// to the one before), to its group or to it alone, and checks everything the issue asks.
-fn stopped_bench_leaves_nothing_and_keeps_its_episodes(signals: &[libc::c_int], group: bool) {
+/// The bench runs in `dir`; returns its partial JSON's path.
+fn stopped_bench_leaves_nothing_and_keeps_its_episodes(
+    dir: &Path,
+    signals: &[libc::c_int],
+    group: bool,
+) -> PathBuf {
     let _turn = one_at_a_time();
-    let mut bench = Bench::start();
+    let mut bench = Bench::start(dir);
     bench.wait_for_an_episode();
     let pid = bench.pid();
     let children = children_of(pid);
@@ -231,6 +235,19 @@ fn stopped_bench_leaves_nothing_and_keeps_its_episodes(signals: &[libc::c_int], 
         !bench_files(pid).is_empty(),
         "its pipelines have files while it runs"
     );
+    if signals.len() > 1 {
+        // Physics stopped (SIGSTOP): the clean stop now waits for its grace period, and
+        // only the second signal can end the bench at once.
+        for &c in &children {
+            if std::fs::read_to_string(format!("/proc/{c}/comm"))
+                .is_ok_and(|comm| comm.trim() == "agp-physics")
+            {
+                let c = libc::pid_t::try_from(c).expect("pid fits");
+                // SAFETY: plain kill(2) of a child of our own child, alive (listed just now).
+                unsafe { libc::kill(c, libc::SIGSTOP) };
+            }
+        }
+    }
     for (k, &sig) in signals.iter().enumerate() {
         if k > 0 {
             // The second signal once the bench said it is stopping on the first.
@@ -240,6 +257,13 @@ fn stopped_bench_leaves_nothing_and_keeps_its_episodes(signals: &[libc::c_int], 
     }
     let status = bench.wait();
     let first = signals[0];
+    if signals.len() > 1 {
+        assert!(
+            bench.stderr().contains("again: stopping at once"),
+            "the second signal forced the exit; stderr:\n{}",
+            bench.stderr()
+        );
+    }
     assert_eq!(
         status.code(),
         Some(128 + first),
@@ -270,32 +294,59 @@ fn stopped_bench_leaves_nothing_and_keeps_its_episodes(signals: &[libc::c_int], 
         "the bench says where its partial JSON is; stderr:\n{}",
         bench.stderr()
     );
+    bench.json_path()
 }
 
 #[test]
 fn sigint_to_the_bench_process_group_stops_it_cleanly_with_a_partial_json() {
-    stopped_bench_leaves_nothing_and_keeps_its_episodes(&[libc::SIGINT], true);
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    stopped_bench_leaves_nothing_and_keeps_its_episodes(dir.path(), &[libc::SIGINT], true);
 }
 
 #[test]
 fn sigint_to_the_bench_alone_stops_it_cleanly_with_a_partial_json() {
-    stopped_bench_leaves_nothing_and_keeps_its_episodes(&[libc::SIGINT], false);
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    stopped_bench_leaves_nothing_and_keeps_its_episodes(dir.path(), &[libc::SIGINT], false);
 }
 
 #[test]
-fn sigterm_stops_the_bench_cleanly_with_a_partial_json() {
-    stopped_bench_leaves_nothing_and_keeps_its_episodes(&[libc::SIGTERM], false);
+fn sigterm_stops_the_bench_cleanly_with_a_partial_json_that_a_merge_takes_only_when_told() {
+    let tmp = tempfile::tempdir().expect("a temporary folder");
+    let dir = tmp.path();
+    stopped_bench_leaves_nothing_and_keeps_its_episodes(dir, &[libc::SIGTERM], false);
+    let merge = |extra: &[&str]| {
+        let mut args = vec!["bench", "merge", "place.json", "--json", "merged.json"];
+        args.extend_from_slice(extra);
+        run_agp(dir, &args, TIMEOUT)
+    };
+    let refused = merge(&[]);
+    assert!(!refused.status.success(), "{}", refused.stdout);
+    assert!(
+        refused.stderr.contains("partial") && refused.stderr.contains("--allow-partial"),
+        "{}",
+        refused.stderr
+    );
+    assert!(!dir.join("merged.json").exists());
+    let taken = merge(&["--allow-partial"]);
+    assert!(taken.status.success(), "{}", taken.stderr);
+    assert_eq!(read_json(&dir.join("merged.json"))["partial"], true);
 }
 
 #[test]
 fn a_second_sigint_stops_the_bench_at_once_and_still_leaves_nothing() {
-    stopped_bench_leaves_nothing_and_keeps_its_episodes(&[libc::SIGINT, libc::SIGINT], true);
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    stopped_bench_leaves_nothing_and_keeps_its_episodes(
+        dir.path(),
+        &[libc::SIGINT, libc::SIGINT],
+        true,
+    );
 }
 
 #[test]
 fn the_next_bench_removes_what_a_bench_killed_with_sigkill_left_and_says_so() {
     let _turn = one_at_a_time();
-    let mut first = Bench::start();
+    let dirs = [tempfile::tempdir(), tempfile::tempdir()].map(|d| d.expect("a temporary folder"));
+    let mut first = Bench::start(dirs[0].path());
     first.wait_for_an_episode();
     let pid = first.pid();
     let children = children_of(pid);
@@ -316,7 +367,7 @@ fn the_next_bench_removes_what_a_bench_killed_with_sigkill_left_and_says_so() {
     assert_eq!(doc["partial"], true, "{doc}");
     assert!(episodes_in(&doc) >= 1, "{doc}");
 
-    let mut second = Bench::start();
+    let mut second = Bench::start(dirs[1].path());
     second.wait_for("leftover instance(s) of benches that died");
     let said = second
         .seen

@@ -989,6 +989,7 @@ mod tests {
             parts: files,
             json: dir.path().join("merged.json"),
             plot: None,
+            allow_partial: false,
         };
         let err = crate::bench_merge::run(&args).expect_err("refused");
         assert!(!dir.path().join("merged.json").exists());

@@ -27,6 +27,11 @@ pub struct BenchMergeArgs {
     /// Also draw each seed's figures per planner (the spread over the seeds) to this SVG.
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// Merge parts marked `"partial": true` too (a bench stopped by a signal, or its
+    /// checkpoint): refused otherwise, since their figures cover fewer episodes. The merged
+    /// JSON is then marked partial as well.
+    #[arg(long)]
+    pub allow_partial: bool,
 }
 
 /// Reads a part, a one-line error naming the file when it is not a JSON object.
@@ -72,6 +77,24 @@ pub fn run(args: &BenchMergeArgs) -> Result<Value> {
         .iter()
         .map(|p| read_part(p))
         .collect::<Result<_>>()?;
+    let partial: Vec<&PathBuf> = args
+        .parts
+        .iter()
+        .zip(&parts)
+        .filter(|(_, v)| v["partial"] == true)
+        .map(|(p, _)| p)
+        .collect();
+    if let Some(p) = partial.first()
+        && !args.allow_partial
+    {
+        bail!(
+            "`{}`: a partial result ({}): it holds fewer episodes than its run; merge it with `--allow-partial`",
+            p.display(),
+            parts[args.parts.iter().position(|q| q == *p).unwrap_or(0)]["partial_reason"]
+                .as_str()
+                .unwrap_or("stopped before the end")
+        );
+    }
     let first = &args.parts[0];
     let benchmark = parts[0]["benchmark"]
         .as_str()
@@ -82,7 +105,14 @@ pub fn run(args: &BenchMergeArgs) -> Result<Value> {
             )
         })?
         .to_owned();
-    let doc = merge_docs(&benchmark, &parts).map_err(|e| name_the_part(e, &args.parts))?;
+    let mut doc = merge_docs(&benchmark, &parts).map_err(|e| name_the_part(e, &args.parts))?;
+    if !partial.is_empty() {
+        doc["partial"] = serde_json::json!(true);
+        doc["partial_reason"] = serde_json::json!(format!(
+            "merged with --allow-partial from {} partial part(s)",
+            partial.len()
+        ));
+    }
     let seeds: Vec<u64> = doc["seeds"]
         .as_array()
         .map(|a| a.iter().filter_map(Value::as_u64).collect())

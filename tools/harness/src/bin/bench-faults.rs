@@ -70,6 +70,16 @@ struct Args {
     /// Also write the figures and every fault as JSON to this file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
+    /// The benchmark phase, after the faults: this many stop signals (SIGINT, SIGTERM,
+    /// SIGHUP, to the bench's process group or to it alone, a quarter of them sent twice)
+    /// at random moments to running `agp bench place` commands over the pipeline; each
+    /// must exit 128 + N and leave no process and no file, and every partial JSON must
+    /// read back. 0 skips the phase.
+    #[arg(long, default_value_t = 50)]
+    bench_signals: u32,
+    /// Run the benchmark phase only (no fault campaign).
+    #[arg(long)]
+    bench_signals_only: bool,
 }
 
 /// The most restarts a launch file may give a child (`agp`'s own limit is 1000).
@@ -687,7 +697,16 @@ fn learn_ag(bins: &Bins, out: &Path) -> Result<PathBuf> {
         .ok_or_else(|| anyhow!("{} is not UTF-8", out.display()))?;
     let mut child = bins
         .agp(out)
-        .args(["bench", "learn", "--scenario", "triangle", "--out", out_str])
+        .args([
+            "bench",
+            "learn",
+            "--scenario",
+            "triangle",
+            "--seed",
+            "7",
+            "--out",
+            out_str,
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -749,6 +768,16 @@ fn campaign(args: Args) -> Result<Option<String>> {
     eprint!("learning the triangle's AG file for the placements (agp bench learn)...");
     let ag_file = learn_ag(&bins, &work.path().join("ag"))?;
     eprintln!(" {:.1} s", started.elapsed().as_secs_f64());
+    if args.bench_signals_only {
+        let report = bench_signal_phase(&args, &bins, work.path(), &ag_file)?;
+        if let Some(path) = &args.json {
+            let text = serde_json::to_string_pretty(&json!({ "bench_signals": report.json() }))
+                .context("cannot format the JSON")?;
+            std::fs::write(path, text + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        return Ok(report.missed());
+    }
     let mut c = Campaign {
         rng: Rng::new(args.seed),
         decks: Phase::ALL.into_iter().map(|p| (p, Deck::new(p))).collect(),
@@ -776,12 +805,25 @@ fn campaign(args: Args) -> Result<Option<String>> {
         eprintln!();
     }
     let interrupted = result.as_ref().is_err_and(is_interrupt);
+    let signals = if result.is_ok() && c.args.bench_signals > 0 {
+        Some(bench_signal_phase(
+            &c.args,
+            &c.bins,
+            c.work.path(),
+            &c.ag_file,
+        )?)
+    } else {
+        None
+    };
     if result.is_ok() || interrupted {
         let report = Report::new(&c);
         report.print(&c, interrupted);
         if let Some(path) = &c.args.json {
-            let text =
-                serde_json::to_string_pretty(&report.json(&c)).context("cannot format the JSON")?;
+            let mut doc = report.json(&c);
+            if let Some(s) = &signals {
+                doc["bench_signals"] = s.json();
+            }
+            let text = serde_json::to_string_pretty(&doc).context("cannot format the JSON")?;
             std::fs::write(path, text + "\n")
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
@@ -791,11 +833,326 @@ fn campaign(args: Args) -> Result<Option<String>> {
     let lost = c.runs.iter().filter(|r| !r.completed).count();
     let wrong = c.runs.iter().filter(|r| r.correct == Some(false)).count();
     let files: usize = c.runs.iter().map(|r| r.files_left).sum();
-    Ok((not_survived + lost + wrong + files > 0).then(|| {
-        format!(
-            "{not_survived} fault(s) not survived, {lost} run(s) lost, {wrong} wrong, {files} file(s) left"
-        )
-    }))
+    let missed = [
+        (not_survived + lost + wrong + files > 0).then(|| {
+            format!(
+                "{not_survived} fault(s) not survived, {lost} run(s) lost, {wrong} wrong, {files} file(s) left"
+            )
+        }),
+        signals.and_then(|s| s.missed()),
+    ];
+    let missed: Vec<String> = missed.into_iter().flatten().collect();
+    Ok((!missed.is_empty()).then(|| missed.join("; ")))
+}
+
+/// One stop of the benchmark phase.
+#[derive(Debug, Clone)]
+struct BenchStop {
+    signal: i32,
+    to_group: bool,
+    twice: bool,
+    /// When the signal went, s after the bench started.
+    at_s: f64,
+    /// The exit code (`None`: ended by a signal, or never).
+    code: Option<i32>,
+    /// From the (first) signal to the exit, s.
+    stop_s: f64,
+    /// Processes of the bench still alive after it exited.
+    processes_left: usize,
+    /// Files of its pipelines left (`/dev/shm` and root folders).
+    files_left: usize,
+    /// Whether it had said an episode finished.
+    finished_an_episode: bool,
+    /// The JSON: `None` none written; `Some(Ok(episodes))` read back, partial and whole;
+    /// `Some(Err(why))` unreadable or wrong.
+    json: Option<Result<u64, String>>,
+}
+
+impl BenchStop {
+    fn ok(&self) -> bool {
+        self.code == Some(128 + self.signal)
+            && self.processes_left == 0
+            && self.files_left == 0
+            && match &self.json {
+                Some(Ok(_)) => true,
+                Some(Err(_)) => false,
+                // No JSON is right only when no episode had finished.
+                None => !self.finished_an_episode,
+            }
+    }
+}
+
+/// What the benchmark phase measured.
+struct BenchSignalReport {
+    stops: Vec<BenchStop>,
+}
+
+impl BenchSignalReport {
+    fn missed(&self) -> Option<String> {
+        let bad = self.stops.iter().filter(|s| !s.ok()).count();
+        (bad > 0).then(|| format!("{bad} of {} benchmark stop(s) wrong", self.stops.len()))
+    }
+
+    fn json(&self) -> Value {
+        let n = self.stops.len();
+        let count = |f: &dyn Fn(&BenchStop) -> bool| self.stops.iter().filter(|s| f(s)).count();
+        let mut stop_s: Vec<f64> = self.stops.iter().map(|s| s.stop_s).collect();
+        stop_s.sort_by(f64::total_cmp);
+        json!({
+            "signals": n,
+            "sigint": count(&|s| s.signal == libc::SIGINT),
+            "sigterm": count(&|s| s.signal == libc::SIGTERM),
+            "sighup": count(&|s| s.signal == libc::SIGHUP),
+            "to_group": count(&|s| s.to_group),
+            "sent_twice": count(&|s| s.twice),
+            "exit_128_plus_n": count(&|s| s.code == Some(128 + s.signal)),
+            "processes_left": self.stops.iter().map(|s| s.processes_left).sum::<usize>(),
+            "files_left": self.stops.iter().map(|s| s.files_left).sum::<usize>(),
+            "partial_json_readable": count(&|s| matches!(s.json, Some(Ok(_)))),
+            "partial_json_bad": count(&|s| matches!(s.json, Some(Err(_)))),
+            "no_json_before_first_episode": count(&|s| s.json.is_none() && !s.finished_an_episode),
+            "no_json_after_an_episode": count(&|s| s.json.is_none() && s.finished_an_episode),
+            "episodes_kept": self.stops.iter().filter_map(|s| s.json.as_ref()?.as_ref().ok()).sum::<u64>(),
+            "signal_at_min_s": self.stops.iter().map(|s| s.at_s).reduce(f64::min),
+            "signal_at_max_s": self.stops.iter().map(|s| s.at_s).reduce(f64::max),
+            "stop_time_median_s": stop_s.get(n / 2).copied(),
+            "stop_time_max_s": stop_s.last().copied(),
+            "all_ok": self.missed().is_none(),
+            "problems": self.stops.iter().filter(|s| !s.ok()).map(|s| format!("{s:?}")).collect::<Vec<_>>(),
+        })
+    }
+
+    fn print(&self) {
+        let j = self.json();
+        println!(
+            "benchmark phase: {} stop signals to `agp bench place` (SIGINT {}, SIGTERM {}, SIGHUP {}; {} to the process group, {} sent twice)",
+            j["signals"], j["sigint"], j["sigterm"], j["sighup"], j["to_group"], j["sent_twice"]
+        );
+        println!(
+            "  exit 128+N {}/{}, processes left {}, files left {}, partial JSONs read back {} (bad {}), no JSON {} (stopped before the first episode ended; {} after one)",
+            j["exit_128_plus_n"],
+            j["signals"],
+            j["processes_left"],
+            j["files_left"],
+            j["partial_json_readable"],
+            j["partial_json_bad"],
+            j["no_json_before_first_episode"],
+            j["no_json_after_an_episode"]
+        );
+        println!(
+            "  episodes kept in the partial JSONs {}; signal to exit: median {:.2} s, max {:.2} s",
+            j["episodes_kept"],
+            j["stop_time_median_s"].as_f64().unwrap_or(f64::NAN),
+            j["stop_time_max_s"].as_f64().unwrap_or(f64::NAN)
+        );
+        for s in self.stops.iter().filter(|s| !s.ok()) {
+            println!("  WRONG: {s:?}");
+        }
+    }
+}
+
+/// The pids whose parent is `pid`.
+fn children_of(pid: u32) -> Vec<u32> {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(Result::ok)
+        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|&p| {
+            std::fs::read_to_string(format!("/proc/{p}/stat"))
+                .ok()
+                .and_then(|s| {
+                    let (_, rest) = s.rsplit_once(')')?;
+                    rest.split_whitespace().nth(1)?.parse::<u32>().ok()
+                })
+                == Some(pid)
+        })
+        .collect()
+}
+
+/// Files of the pipelines of the bench of `pid`: `/dev/shm/agp_bench-<pid>-…` and root
+/// folders `bench-<pid>-*`.
+fn bench_files_of(pid: u32) -> usize {
+    let base = agp_runtime::Instance::new("bench-0-x")
+        .ok()
+        .and_then(|i| i.root_dir().parent().map(Path::to_path_buf))
+        .unwrap_or_else(|| PathBuf::from("/tmp/agp"));
+    let count = |dir: &Path, prefix: &str| {
+        std::fs::read_dir(dir).map_or(0, |entries| {
+            entries
+                .filter_map(Result::ok)
+                .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+                .count()
+        })
+    };
+    count(Path::new("/dev/shm"), &format!("agp_bench-{pid}-"))
+        + count(&base, &format!("bench-{pid}-"))
+}
+
+/// The benchmark phase: `args.bench_signals` benches stopped by a signal at a random
+/// moment (0.3 to 8 s after their start: setting up, placing, between episodes).
+fn bench_signal_phase(
+    args: &Args,
+    bins: &Bins,
+    work: &Path,
+    ag_file: &Path,
+) -> Result<BenchSignalReport> {
+    const SIGNALS: [i32; 3] = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP];
+    let mut rng = Rng::stream(args.seed, 35);
+    let mut stops = Vec::new();
+    for i in 0..args.bench_signals {
+        let dir = work.join(format!("bench-signal-{i}"));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        let sig = SIGNALS[(rng.next_u64() % 3) as usize];
+        let to_group = rng.uniform() < 0.5;
+        let twice = rng.uniform() < 0.25;
+        let at = Duration::from_secs_f64(rng.range(0.3, 8.0));
+        let err_path = dir.join("bench.err");
+        let mut child = bins
+            .agp(&dir)
+            .args([
+                "bench",
+                "place",
+                "--scenario",
+                "triangle",
+                "--episodes",
+                "40",
+            ])
+            .args(["--seed", &(200 + u64::from(i)).to_string()])
+            .args(["--planners", "affordance,baseline", "--ag"])
+            .arg(ag_file)
+            .args(["--json", "place.json"])
+            .stdout(Stdio::null())
+            .stderr(
+                std::fs::File::create(&err_path)
+                    .with_context(|| format!("cannot create {}", err_path.display()))?,
+            )
+            .spawn()
+            .context("cannot start `agp bench place`")?;
+        let pid = child.id();
+        let started = Instant::now();
+        let mut ended = None;
+        while started.elapsed() < at {
+            if let Some(s) = child.try_wait().context("cannot watch the bench")? {
+                ended = Some(s);
+                break;
+            }
+            if let Err(e) = sleep_checked(Duration::from_millis(10)) {
+                signal(pid, libc::SIGKILL);
+                let _ = child.wait();
+                return Err(e);
+            }
+        }
+        if ended.is_some() {
+            bail!(
+                "`agp bench place` ended before its signal; see {}",
+                err_path.display()
+            );
+        }
+        let mut pids = children_of(pid);
+        let at_s = started.elapsed().as_secs_f64();
+        let target = if to_group { -(pid as i64) } else { pid as i64 };
+        let send = |s: i32| {
+            // SAFETY: plain kill(2) of our own child, not reaped, or the group it leads.
+            unsafe { libc::kill(target as libc::pid_t, s) };
+        };
+        let sent = Instant::now();
+        send(sig);
+        if twice {
+            // Once the bench said it is stopping (or 2 s, if it did not get there).
+            while sent.elapsed() < Duration::from_secs(2)
+                && !std::fs::read_to_string(&err_path)
+                    .unwrap_or_default()
+                    .contains("a second signal stops at once")
+                && child.try_wait().ok().flatten().is_none()
+            {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            send(sig);
+        }
+        let exit = loop {
+            if let Some(s) = child.try_wait().context("cannot watch the bench")? {
+                break Some(s);
+            }
+            if sent.elapsed() > Duration::from_secs(60) {
+                signal(pid, libc::SIGKILL);
+                let _ = child.wait();
+                break None;
+            }
+            for p in children_of(pid) {
+                if !pids.contains(&p) {
+                    pids.push(p);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        let stop_s = sent.elapsed().as_secs_f64();
+        // Children already dying (killed with the bench) get a moment.
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while pids.iter().any(|&p| !agp_harness::pipeline::is_gone(p)) && Instant::now() < deadline
+        {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let processes_left = pids
+            .iter()
+            .filter(|&&p| !agp_harness::pipeline::is_gone(p))
+            .count();
+        reap_children(bins, &pids, Duration::ZERO);
+        let stderr = std::fs::read_to_string(&err_path).unwrap_or_default();
+        let json_path = dir.join("place.json");
+        let json = json_path.is_file().then(|| {
+            let text = std::fs::read_to_string(&json_path).map_err(|e| e.to_string())?;
+            let v: Value = serde_json::from_str(&text).map_err(|e| format!("not JSON: {e}"))?;
+            if v["partial"] != true {
+                return Err("not marked partial".to_owned());
+            }
+            let held: u64 = v["planners"]
+                .as_object()
+                .map(|m| m.values().filter_map(|p| p["episodes"].as_u64()).sum())
+                .unwrap_or(0);
+            if v["episodes_finished"].as_u64() != Some(held) {
+                return Err(format!(
+                    "episodes_finished {} but {held} held",
+                    v["episodes_finished"]
+                ));
+            }
+            Ok(held)
+        });
+        let stop = BenchStop {
+            signal: sig,
+            to_group,
+            twice,
+            at_s,
+            code: exit.and_then(|e| e.code()),
+            stop_s,
+            processes_left,
+            files_left: bench_files_of(pid),
+            finished_an_episode: stderr.contains(" done ("),
+            json,
+        };
+        eprintln!(
+            "bench signal {}/{}: {} {} at {at_s:.1} s{}: exit {:?} after {stop_s:.2} s, {} process(es) and {} file(s) left, JSON {:?}",
+            i + 1,
+            args.bench_signals,
+            agp_harness::stop::signal_name(sig),
+            if to_group {
+                "to the group"
+            } else {
+                "to the bench"
+            },
+            if twice { " (twice)" } else { "" },
+            stop.code,
+            stop.processes_left,
+            stop.files_left,
+            stop.json
+        );
+        stops.push(stop);
+    }
+    let report = BenchSignalReport { stops };
+    report.print();
+    Ok(report)
 }
 
 /// The figures of a campaign.
