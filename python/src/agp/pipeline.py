@@ -200,6 +200,22 @@ def read_str(field) -> str:
     return bytes(field).split(b"\0", 1)[0].decode(errors="replace")
 
 
+def spin_seconds(wait: str) -> float:
+    """How long a wait polls before it blocks, by `AGP_WAIT` as the Rust processes read it:
+    `block` 0, `spin` and `yield` (always poll) 1 s slices, `spin-then-block:US` US
+    microseconds, and the default (unset or unknown) 200 us."""
+    if wait == "block":
+        return 0.0
+    if wait in ("spin", "yield"):
+        return 1.0
+    if wait.startswith("spin-then-block:"):
+        try:
+            return max(float(wait.split(":", 1)[1]), 0.0) * 1e-6
+        except ValueError:
+            pass
+    return 200e-6
+
+
 class Ring:
     """The ring for a wheel-level planner: `step(l, r)` sends the command answering the
     latest frame and returns once a later frame and its estimate are in."""
@@ -227,6 +243,7 @@ class Ring:
         self.seq = 0  # this planner's events
         self.sent_ns = 0
         self.steps = 0
+        self.spin_s = spin_seconds(os.environ.get("AGP_WAIT", ""))
         self._wait(after_step=-1)
 
     # -- samples -------------------------------------------------------------------------------
@@ -301,13 +318,19 @@ class Ring:
         )
 
     def _wait(self, after_step: int) -> None:
+        """Until `_paired`: polls for up to `spin_s` (`AGP_WAIT`'s spin, as the Rust
+        processes' default `spin-then-block:200`), then blocks on the estimates' event."""
         deadline = time.monotonic() + self.timeout_s
         wait = iox2.Duration.from_millis(20)
+        spin_until = time.perf_counter() + self.spin_s
         while True:
             self._drain()
             if self._paired(after_step):
                 self.received_ns = time.monotonic_ns()
                 return
+            if self.spin_s > 0.0 and time.perf_counter() < spin_until:
+                os.sched_yield()  # polls with yields, as the Rust waits do
+                continue
             if _stop:
                 raise Shutdown()
             if time.monotonic() > deadline:

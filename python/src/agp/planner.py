@@ -8,7 +8,7 @@ goal is reached) with the pipeline's own skills: travel, push, circling.
 
 Either serves a live session's goals one after another with `--serve` among the script's
 arguments (launch.toml: `args = ["--serve"]`), reporting each end to the supervisor, and
-otherwise the scenario's goal, once. It takes over on a hot swap (`AGP_EPOCH` > 0), hands
+otherwise the scenario's goal (or `--goal X_MM,Y_MM,THETA_DEG`), once. It takes over on a hot swap (`AGP_EPOCH` > 0), hands
 over when swapped out (SIGTERM), and carries on after a physics restart.
 """
 
@@ -313,6 +313,10 @@ def _run_wheels(planner: Planner) -> int:
     goal: Goal | None = None
     if not serve:
         goal = _scenario_goal()
+        argv = sys.argv[1:]
+        if "--goal" in argv[:-1]:
+            x, y, t = (float(v) for v in argv[argv.index("--goal") + 1].split(","))
+            goal = Goal(0, x, y, t, goal.tolerance_mm, goal.tolerance_deg)
     obs = Obs()
     started, wall, steps = ring.frame.sim_time_s, time.monotonic(), 0
     try:
@@ -418,6 +422,9 @@ def _run_push(planner: PushPlanner) -> int:
     requests = node.pubsub("agp/push_requests", PushRequest, create=qos).subscriber_builder().create()
     choices = node.pubsub("agp/push_choices", PushChoice, create=qos).publisher_builder().create()
     args = [_planner_binary(), "--mode", "serve" if serve else "place", "--planner", "affordance", "--skills"]
+    argv = sys.argv[1:]
+    if "--goal" in argv[:-1]:  # X_MM,Y_MM,THETA_DEG instead of the scenario's, as agp-planner takes it
+        args += ["--goal", argv[argv.index("--goal") + 1]]
     child = subprocess.Popen(args, env=os.environ.copy(), preexec_fn=_die_with_parent)
     try:
         ag = _read_gradient(node)
