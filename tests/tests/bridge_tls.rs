@@ -423,3 +423,22 @@ fn a_private_key_open_to_others_and_a_remote_with_neither_tls_nor_insecure_are_r
     // Nothing started: no file of the instance.
     assert_eq!(count_instance_files(&a), 0, "files of `{a}` remain");
 }
+
+#[test]
+fn the_links_floor_is_a_bare_zenoh_ping_pong_over_tls_or_plain_tcp() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let keys = dir.path().join("keys");
+    keygen(dir.path(), &keys);
+    for (security, says) in [
+        (vec!["--tls", keys.to_str().expect("UTF-8")], "(mutual TLS)"),
+        (vec!["--insecure"], "(plain TCP)"),
+    ] {
+        let mut args = vec!["bridge", "floor", "--seconds", "0.2"];
+        args.extend(security);
+        let out = run_agp(dir.path(), &args, TIMEOUT);
+        out.assert_success("`agp bridge floor`");
+        println!("{}", out.stdout);
+        assert!(out.stdout.contains(says), "{}", out.stdout);
+        assert!(out.stdout.contains("one way p50"), "{}", out.stdout);
+    }
+}

@@ -88,7 +88,7 @@ impl Endpoint {
     /// connects to it only (and listens nowhere), with multicast and gossip scouting off,
     /// so the bridge opens no socket but the one named. A `tls/` endpoint takes `tls`, the
     /// link's keys of this side, and requires mutual authentication; a `tcp/` one takes none.
-    pub(crate) fn zenoh_config(&self, tls: Option<&TlsKeys>) -> Result<zenoh::Config, String> {
+    pub fn zenoh_config(&self, tls: Option<&TlsKeys>) -> Result<zenoh::Config, String> {
         let mut c = zenoh::Config::default();
         let json = |v: &str| serde_json_string(v);
         let (listen, connect) = match self {

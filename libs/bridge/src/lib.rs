@@ -11,6 +11,7 @@
 
 mod bridge;
 mod endpoint;
+mod floor;
 mod ports;
 mod route;
 pub mod tls;
@@ -18,6 +19,7 @@ pub mod wire;
 
 pub use bridge::{BridgeConfig, BridgeEnd, BridgeError, BridgeReport, run_bridge};
 pub use endpoint::{Endpoint, EndpointParseError};
+pub use floor::{FloorError, FloorFigures, floor_ping, floor_pong};
 pub use ports::Restamp;
 pub use route::{
     BRIDGED_TOPICS, BridgedTopic, Latch, Side, TopicListParseError, all_topics, bridged_topic,

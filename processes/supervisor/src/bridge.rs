@@ -76,6 +76,109 @@ enum BridgeCommand {
         #[arg(long = "host", value_name = "NAME")]
         hosts: Vec<String>,
     },
+    /// Measure the link's floor: a bare Zenoh ping-pong between this process and a copy of
+    /// it over the loopback, on the transport a bridge uses (`--tls DIR`: mutual TLS;
+    /// `--insecure`: plain TCP), with no iceoryx2 on either side. Prints the one-way
+    /// latency (half a round trip) to set a bridged hop of `agp profile` against.
+    ///
+    /// Example: agp bridge floor --tls results/bridge-keys --seconds 3
+    Floor {
+        #[command(flatten)]
+        security: Security,
+        /// Seconds of timed round trips (after 200 untimed).
+        #[arg(long, default_value_t = 3.0)]
+        seconds: f64,
+        /// Bytes per sample (a motor command is 64, a frame a few hundred).
+        #[arg(long, default_value_t = 64)]
+        size: usize,
+    },
+    /// The far end of `agp bridge floor` (run by it, not by hand).
+    #[command(name = "floor-pong", hide = true)]
+    FloorPong {
+        #[arg(long)]
+        listen: String,
+        #[command(flatten)]
+        security: Security,
+    },
+}
+
+/// The link's security, as `--tls DIR` or `--insecure` give it.
+#[derive(Debug, clap::Args)]
+#[group(required = true, multiple = false)]
+struct Security {
+    /// The link's key folder (`agp bridge keygen DIR`).
+    #[arg(long, value_name = "DIR")]
+    tls: Option<PathBuf>,
+    /// Plain TCP.
+    #[arg(long)]
+    insecure: bool,
+}
+
+impl Security {
+    /// The keys of `side`, and the endpoint scheme that goes with them.
+    fn keys(&self, side: Side) -> Result<(Option<TlsKeys>, &'static str)> {
+        Ok(match &self.tls {
+            Some(dir) => (Some(TlsKeys::load(dir, side)?), "tls"),
+            None => (None, "tcp"),
+        })
+    }
+
+    fn args(&self) -> Vec<String> {
+        match &self.tls {
+            Some(dir) => vec!["--tls".to_owned(), dir.display().to_string()],
+            None => vec!["--insecure".to_owned()],
+        }
+    }
+}
+
+/// `agp bridge floor`: a bare Zenoh ping-pong between this process and a copy of it over
+/// the loopback, on the transport the link would use.
+fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
+    let (keys, scheme) = security.keys(Side::Planner)?;
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .context("a free port on the loopback")?
+        .port();
+    let locator = format!("{scheme}/127.0.0.1:{port}");
+    let exe = std::env::current_exe().context("the path of agp")?;
+    let mut pong = std::process::Command::new(exe)
+        .args(["bridge", "floor-pong", "--listen", &locator])
+        .args(security.args())
+        .stdin(std::process::Stdio::null())
+        .spawn()
+        .context("start the floor's pong end")?;
+    let figures =
+        agp_bridge::floor_ping(&Endpoint::connect(&locator)?, keys.as_ref(), seconds, size);
+    let _ = pong.kill();
+    let _ = pong.wait();
+    let f = figures?;
+    let us = |ns: u64| ns as f64 / 1e3;
+    println!(
+        "agp: Zenoh floor over {locator} ({}), {size} B samples, {} round trips: one way p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        if keys.is_some() {
+            "mutual TLS"
+        } else {
+            "plain TCP"
+        },
+        f.round_trips,
+        us(f.p50_ns),
+        us(f.p90_ns),
+        us(f.p99_ns),
+        us(f.max_ns)
+    );
+    Ok(0)
+}
+
+/// `agp bridge floor-pong`: the far end of `agp bridge floor`.
+fn floor_pong(listen: &str, security: &Security) -> Result<u8> {
+    agp_runtime::install_shutdown_handler();
+    let (keys, _) = security.keys(Side::Robot)?;
+    agp_bridge::floor_pong(
+        &Endpoint::listen(listen)?,
+        keys.as_ref(),
+        agp_runtime::shutdown_requested,
+    )?;
+    Ok(0)
 }
 
 /// The warning a bridge on plain TCP starts with.
@@ -101,8 +204,17 @@ fn keygen(dir: &Path, hosts: &[String]) -> Result<u8> {
 }
 
 pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
-    if let Some(BridgeCommand::Keygen { dir, hosts }) = &args.command {
-        return keygen(dir, hosts);
+    match &args.command {
+        Some(BridgeCommand::Keygen { dir, hosts }) => return keygen(dir, hosts),
+        Some(BridgeCommand::Floor {
+            security,
+            seconds,
+            size,
+        }) => return floor(security, *seconds, *size),
+        Some(BridgeCommand::FloorPong { listen, security }) => {
+            return floor_pong(listen, security);
+        }
+        None => {}
     }
     let (Some(instance_name), Some(side_name)) = (&args.instance, &args.side) else {
         bail!("give --instance and --side (or `agp bridge keygen DIR`)");

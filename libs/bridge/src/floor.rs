@@ -1,0 +1,181 @@
+//! The link's floor: a bare Zenoh ping-pong between two processes over the transport a
+//! bridge uses (the same endpoint kind, keys, publisher options and receive path), with no
+//! iceoryx2 on either side. What a bridged hop costs beyond it is the bridge's own.
+//!
+//! The pong end listens and echoes each sample from the ping key onto the pong key; the ping
+//! end connects, sends one sample at a time, stamped, and times its round trip. A one-way
+//! figure is half a round trip.
+
+use std::time::{Duration, Instant};
+
+use zenoh::Wait;
+use zenoh::qos::CongestionControl;
+
+use crate::endpoint::Endpoint;
+use crate::tls::TlsKeys;
+
+/// Key the ping end puts on.
+const PING_KEY: &str = "agp-floor/ping";
+/// Key the pong end answers on.
+const PONG_KEY: &str = "agp-floor/pong";
+/// Longest wait for one answer, and for the far end to come up; a safety net.
+pub const FLOOR_TIMEOUT: Duration = Duration::from_secs(20);
+/// Round trips before the timed ones.
+const WARMUP: u64 = 200;
+
+/// Why the floor could not be measured.
+#[derive(Debug, thiserror::Error)]
+pub enum FloorError {
+    #[error("cannot open the Zenoh session on `{endpoint}`: {detail}")]
+    Session { endpoint: String, detail: String },
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("no answer from the floor's pong end within {0:?}")]
+    NoAnswer(Duration),
+}
+
+fn zerr(e: impl std::fmt::Display) -> FloorError {
+    FloorError::Zenoh(e.to_string())
+}
+
+fn open(endpoint: &Endpoint, tls: Option<&TlsKeys>) -> Result<zenoh::Session, FloorError> {
+    let session_err = |detail: String| FloorError::Session {
+        endpoint: endpoint.locator().to_owned(),
+        detail,
+    };
+    let config = endpoint.zenoh_config(tls).map_err(session_err)?;
+    zenoh::open(config)
+        .wait()
+        .map_err(|e| session_err(e.to_string()))
+}
+
+/// The floor's figures: one-way latency (half a round trip), nanoseconds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FloorFigures {
+    pub round_trips: u64,
+    pub p50_ns: u64,
+    pub p90_ns: u64,
+    pub p99_ns: u64,
+    pub max_ns: u64,
+}
+
+/// Echoes pings until `stop` says so (checked between samples, at least every 20 ms).
+pub fn floor_pong(
+    endpoint: &Endpoint,
+    tls: Option<&TlsKeys>,
+    stop: impl Fn() -> bool,
+) -> Result<(), FloorError> {
+    let session = open(endpoint, tls)?;
+    let publisher = session
+        .declare_publisher(PONG_KEY)
+        .congestion_control(CongestionControl::Block)
+        .express(true)
+        .wait()
+        .map_err(zerr)?;
+    let pings = session
+        .declare_subscriber(PING_KEY)
+        .with(zenoh::handlers::FifoChannel::new(64))
+        .wait()
+        .map_err(zerr)?;
+    while !stop() {
+        match pings.recv_timeout(Duration::from_millis(20)) {
+            Ok(Some(sample)) => {
+                let bytes = sample.payload().to_bytes();
+                if bytes.is_empty() {
+                    break;
+                }
+                publisher.put(bytes.to_vec()).wait().map_err(zerr)?;
+            }
+            Ok(None) => {}
+            Err(e) => return Err(zerr(e)),
+        }
+    }
+    let _ = session.close().wait();
+    Ok(())
+}
+
+/// Pings the pong end at `endpoint` for `seconds` of timed round trips of `size`-byte
+/// samples (at least 16) after a warm-up, one at a time, and tells the pong end to stop.
+pub fn floor_ping(
+    endpoint: &Endpoint,
+    tls: Option<&TlsKeys>,
+    seconds: f64,
+    size: usize,
+) -> Result<FloorFigures, FloorError> {
+    let session = open(endpoint, tls)?;
+    let publisher = session
+        .declare_publisher(PING_KEY)
+        .congestion_control(CongestionControl::Block)
+        .express(true)
+        .wait()
+        .map_err(zerr)?;
+    let pongs = session
+        .declare_subscriber(PONG_KEY)
+        .with(zenoh::handlers::FifoChannel::new(64))
+        .wait()
+        .map_err(zerr)?;
+    let size = size.max(16);
+    // Until the pong end answers (it may still be opening its session), ping every 50 ms.
+    let start = Instant::now();
+    let mut seq: u64 = 0;
+    let mut payload = vec![0u8; size];
+    let send = |seq: u64, payload: &mut Vec<u8>| -> Result<(), FloorError> {
+        payload[..8].copy_from_slice(&seq.to_le_bytes());
+        publisher.put(payload.clone()).wait().map_err(zerr)
+    };
+    'up: loop {
+        send(seq, &mut payload)?;
+        if let Ok(Some(_)) = pongs.recv_timeout(Duration::from_millis(50)) {
+            break 'up;
+        }
+        if start.elapsed() > FLOOR_TIMEOUT {
+            return Err(FloorError::NoAnswer(FLOOR_TIMEOUT));
+        }
+    }
+    // Drain late answers of the start-up pings.
+    while let Ok(Some(_)) = pongs.try_recv() {}
+    let mut one_way: Vec<u64> = Vec::with_capacity(1 << 20);
+    let timed = Duration::from_secs_f64(seconds.max(0.1));
+    let mut timed_from: Option<Instant> = None;
+    loop {
+        seq += 1;
+        let sent = Instant::now();
+        send(seq, &mut payload)?;
+        // Answers carry the sequence number; a late start-up answer is skipped.
+        loop {
+            match pongs.recv_timeout(FLOOR_TIMEOUT) {
+                Ok(Some(s)) => {
+                    let b = s.payload().to_bytes();
+                    let got = b
+                        .get(..8)
+                        .and_then(|h| <[u8; 8]>::try_from(h).ok())
+                        .map(u64::from_le_bytes);
+                    if got == Some(seq) {
+                        break;
+                    }
+                }
+                Ok(None) => return Err(FloorError::NoAnswer(FLOOR_TIMEOUT)),
+                Err(e) => return Err(zerr(e)),
+            }
+        }
+        let rtt = sent.elapsed();
+        if seq > WARMUP {
+            let from = *timed_from.get_or_insert_with(Instant::now);
+            one_way.push(rtt.as_nanos() as u64 / 2);
+            if from.elapsed() >= timed {
+                break;
+            }
+        }
+    }
+    let _ = publisher.put(Vec::<u8>::new()).wait();
+    let _ = session.close().wait();
+    one_way.sort_unstable();
+    let at = |q: f64| one_way[((one_way.len() - 1) as f64 * q).round() as usize];
+    Ok(FloorFigures {
+        round_trips: one_way.len() as u64,
+        p50_ns: at(0.5),
+        p90_ns: at(0.9),
+        p99_ns: at(0.99),
+        max_ns: at(1.0),
+    })
+}
