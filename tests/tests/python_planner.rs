@@ -310,3 +310,53 @@ fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_witho
             .join(", ")
     );
 }
+
+#[test]
+fn the_wheel_level_python_planner_carries_on_after_a_physics_restart() {
+    let name = "t-py-wheels-restart";
+    let python = python();
+    let wrappers = tempfile::tempdir().expect("a folder");
+    let python_s = python_wrapper(wrappers.path(), &python);
+    let args = [
+        format!("\"{}\"", example("wheel_planner.py").display()),
+        "\"--serve\"".to_owned(),
+    ];
+    let text = format!(
+        "instance = \"{name}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\
+         restart = {{ policy = \"on-failure\", max_restarts = 2, backoff_ms = 10 }}\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"{python_s}\"\nargs = [{}]\n",
+        learned_ag("triangle").display(),
+        args.join(", ")
+    );
+    let dir = LaunchDir::new(&text);
+    let _guard = DownOnPanic::new(dir.path(), name);
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines("started", 3, TIMEOUT);
+    run_agp(
+        dir.path(),
+        &["goal", "--instance", name, "--place", "300", "150", "90"],
+        TIMEOUT,
+    )
+    .assert_success("`agp goal`");
+    wait_goals_done(dir.path(), name, 1);
+    // Physics dies (SIGKILL); the supervisor starts it again, a new world from the
+    // scenario's start. The planner goes on driving it: the next goal is served.
+    let pid = agp_tests::status_entry(&status_json(dir.path(), name, TIMEOUT), "physics")["pid"]
+        .as_u64()
+        .and_then(|p| i32::try_from(p).ok())
+        .expect("physics runs");
+    // SAFETY: kill(2) of a child of the supervisor this test started, by its pid.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+    up.wait_for_lines("physics: restarted", 1, TIMEOUT);
+    run_agp(
+        dir.path(),
+        &["goal", "--instance", name, "--place", "200", "0", "0"],
+        TIMEOUT,
+    )
+    .assert_success("`agp goal`");
+    let done = wait_goals_done(dir.path(), name, 2);
+    down(dir.path(), name, up);
+    assert_eq!(done[1]["end"], "done", "{:?}", done);
+}
