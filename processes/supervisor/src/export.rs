@@ -65,10 +65,6 @@ pub(crate) fn run(args: &ExportArgs) -> Result<u8> {
     }
     let mut tap = FoxgloveTap::default();
     tap.begin(&mut out).map_err(mcap_err)?;
-    let known: BTreeMap<&str, &str> = recorded_topics()
-        .iter()
-        .map(|t| (t.service, t.type_name))
-        .collect();
     // Per input channel id: its id in OUT (None: not copied) and whether it is drawn.
     let mut channels: BTreeMap<u16, Option<(u16, bool)>> = BTreeMap::new();
     let mut schemas: BTreeMap<u16, u16> = BTreeMap::new();
@@ -93,41 +89,7 @@ pub(crate) fn run(args: &ExportArgs) -> Result<u8> {
         let entry = match channels.get(&c.id) {
             Some(e) => *e,
             None => {
-                let e = if c.message_encoding == "protobuf" {
-                    None
-                } else {
-                    let schema = match &c.schema {
-                        Some(s) => match schemas.get(&s.id) {
-                            Some(id) => *id,
-                            None => {
-                                let id = out
-                                    .add_schema(&s.name, &s.encoding, &s.data)
-                                    .map_err(mcap_err)?;
-                                schemas.insert(s.id, id);
-                                id
-                            }
-                        },
-                        None => 0,
-                    };
-                    let id = out
-                        .add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)
-                        .map_err(mcap_err)?;
-                    let schema_name = c.schema.as_ref().map(|s| s.name.as_str());
-                    let drawn = match known.get(c.topic.as_str()) {
-                        Some(expected) if c.message_encoding == MESSAGE_ENCODING => {
-                            if schema_name != Some(*expected) {
-                                eprintln!(
-                                    "agp export: warning: channel `{}` has schema `{}`, this build reads `{expected}`: copied, not drawn",
-                                    c.topic,
-                                    schema_name.unwrap_or("(none)")
-                                );
-                            }
-                            schema_name == Some(*expected)
-                        }
-                        _ => false,
-                    };
-                    Some((id, drawn))
-                };
+                let e = copy_channel(&mut out, c, &mut schemas).map_err(mcap_err)?;
                 channels.insert(c.id, e);
                 e
             }
@@ -158,6 +120,12 @@ pub(crate) fn run(args: &ExportArgs) -> Result<u8> {
         .map_err(|e| e.into_error())
         .and_then(|f| f.sync_all())
         .with_context(|| format!("cannot complete {}", args.output.display()))?;
+    print_counts(args, copied, &tap);
+    Ok(0)
+}
+
+/// What `agp export` says at its end: the messages copied, the Foxglove channels' counts.
+fn print_counts(args: &ExportArgs, copied: u64, tap: &FoxgloveTap) {
     println!(
         "agp export: {} -> {}: {copied} recorded messages copied; Foxglove channels:",
         args.input.display(),
@@ -172,5 +140,48 @@ pub(crate) fn run(args: &ExportArgs) -> Result<u8> {
             tap.refused()
         );
     }
-    Ok(0)
+}
+
+/// Adds input channel `c` (and its schema, once) to `out`: its id there and whether the
+/// tap draws it (a raw channel of a topic whose schema is the payload type this build
+/// knows); `None` for a Foxglove channel, which is written anew.
+fn copy_channel(
+    out: &mut agp_recording::McapFile,
+    c: &mcap::Channel<'static>,
+    schemas: &mut BTreeMap<u16, u16>,
+) -> Result<Option<(u16, bool)>, mcap::McapError> {
+    if c.message_encoding == "protobuf" {
+        return Ok(None);
+    }
+    let schema = match &c.schema {
+        Some(s) => match schemas.get(&s.id) {
+            Some(id) => *id,
+            None => {
+                let id = out.add_schema(&s.name, &s.encoding, &s.data)?;
+                schemas.insert(s.id, id);
+                id
+            }
+        },
+        None => 0,
+    };
+    let id = out.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?;
+    let schema_name = c.schema.as_ref().map(|s| s.name.as_str());
+    let expected = recorded_topics()
+        .iter()
+        .find(|t| t.service == c.topic)
+        .map(|t| t.type_name);
+    let drawn = match expected {
+        Some(expected) if c.message_encoding == MESSAGE_ENCODING => {
+            if schema_name != Some(expected) {
+                eprintln!(
+                    "agp export: warning: channel `{}` has schema `{}`, this build reads `{expected}`: copied, not drawn",
+                    c.topic,
+                    schema_name.unwrap_or("(none)")
+                );
+            }
+            schema_name == Some(expected)
+        }
+        _ => false,
+    };
+    Ok(Some((id, drawn)))
 }
