@@ -60,7 +60,7 @@ for dir in tools/foxglove-client; do
     npm_stamp="$dir/node_modules/.agp-setup-stamp"
     if [ "$(cat "$npm_stamp" 2>/dev/null)" != "$npm_hash" ]; then
         say "installing the npm packages of $dir (npm ci)"
-        (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error) || fail "npm ci in $dir failed"
+        (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error >/dev/null) || fail "npm ci in $dir failed"
         echo "$npm_hash" > "$npm_stamp"
     else
         say "npm packages up to date ($dir)"
