@@ -55,6 +55,54 @@ pub struct BenchPaperArgs {
     /// instead of running the pipeline's processes.
     #[arg(long)]
     pub in_process: bool,
+    /// Exit non-zero (1, after writing everything) when a target the table prints is
+    /// missed, naming each: for scripts and CI that must not read a table to see a miss.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// Every target of the paper run that `doc` misses, one line each, in the order the table
+/// prints them: the trajectory ratio over every path and on each path, the affordance
+/// planner's placement success on each object, and each learning target.
+pub fn missed_targets(doc: &Value) -> Vec<String> {
+    let mut missed = Vec::new();
+    let t = &doc["trajectory"];
+    let ratio = num(t, &["ratio"]);
+    if !(ratio <= TARGET_TRAJECTORY_RATIO) {
+        missed.push(format!(
+            "trajectory ratio affordance / baseline <= {TARGET_TRAJECTORY_RATIO}, overall: {ratio:.2}"
+        ));
+    }
+    if let Some(paths) = t["paths"].as_object() {
+        for (name, p) in paths {
+            let r = num(p, &["ratio"]);
+            if !(r <= TARGET_TRAJECTORY_RATIO) {
+                missed.push(format!(
+                    "trajectory ratio <= {TARGET_TRAJECTORY_RATIO} on the {name} path: {r:.2}"
+                ));
+            }
+        }
+    }
+    for object in PLACE_OBJECTS {
+        let rate = num(
+            &doc["place"][object],
+            &["planners", PlannerKind::Affordance.name(), "success_rate"],
+        );
+        if !(rate >= TARGET_PLACE_SUCCESS) {
+            missed.push(format!(
+                "placement success of the affordance planner >= {:.0} % on {object}: {:.0} %",
+                100.0 * TARGET_PLACE_SUCCESS,
+                100.0 * rate
+            ));
+        }
+    }
+    if let Some(list) = doc["learn"]["targets_missed"].as_array() {
+        missed.extend(
+            list.iter()
+                .map(|m| format!("learning: {}", m.as_str().unwrap_or_default())),
+        );
+    }
+    missed
 }
 
 /// The one-seed document inside a benchmark's document: its only `per_seed` entry, or the
@@ -158,6 +206,14 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
     if let Some(path) = &args.json {
         bench_tasks::write_json(path, &doc)?;
         println!("JSON     {}", path.display());
+    }
+    let missed = missed_targets(&doc);
+    if args.check && !missed.is_empty() {
+        anyhow::bail!(
+            "--check: {} target(s) missed: {}",
+            missed.len(),
+            missed.join("; ")
+        );
     }
     Ok(doc)
 }
@@ -410,4 +466,51 @@ fn print_comparison(doc: &Value, episodes: usize) {
         }
     }
     println!("wall time {:.1} s", num(doc, &["wall_time_s"]));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A paper document that meets every target: two paths, both objects placed at 100 %.
+    fn all_met() -> Value {
+        json!({
+            "trajectory": {
+                "ratio": 0.43,
+                "paths": { "straight": { "ratio": 0.56 }, "bend45": { "ratio": 0.55 } }
+            },
+            "place": {
+                "triangle": { "planners": { "affordance": { "success_rate": 1.0 } } },
+                "lshape": { "planners": { "affordance": { "success_rate": 0.95 } } }
+            },
+            "learn": { "targets_missed": [] }
+        })
+    }
+
+    #[test]
+    fn a_run_that_meets_every_target_misses_none() {
+        assert_eq!(missed_targets(&all_met()), Vec::<String>::new());
+    }
+
+    #[test]
+    fn each_target_made_unreachable_is_named_as_missed() {
+        let mut doc = all_met();
+        doc["trajectory"]["paths"]["bend45"]["ratio"] = json!(0.61);
+        doc["place"]["lshape"]["planners"]["affordance"]["success_rate"] = json!(0.9);
+        doc["learn"]["targets_missed"] = json!(["lshape: rotation error (5.3 deg)"]);
+        let missed = missed_targets(&doc);
+        assert_eq!(missed.len(), 3, "{missed:?}");
+        assert!(missed[0].contains("bend45 path: 0.61"), "{missed:?}");
+        assert!(missed[1].contains("on lshape: 90 %"), "{missed:?}");
+        assert!(missed[2].contains("learning: lshape"), "{missed:?}");
+    }
+
+    #[test]
+    fn a_figure_missing_from_the_document_counts_as_missed() {
+        let mut doc = all_met();
+        doc["trajectory"] = json!({});
+        let missed = missed_targets(&doc);
+        assert_eq!(missed.len(), 1, "{missed:?}");
+        assert!(missed[0].contains("overall"), "{missed:?}");
+    }
 }
