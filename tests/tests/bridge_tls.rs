@@ -23,9 +23,9 @@ const PLACE_TIMEOUT: Duration = Duration::from_secs(600);
 /// handshake is refused at once; the session only retries until then).
 const STRANGER_TRIES_MS: u64 = 3_000;
 
-/// A port of this test process's own: `k` (0-3) apart for each test.
+/// A port of this test process's own: `k` (0-4) apart for each test.
 fn port(k: u16) -> u16 {
-    30_000 + (std::process::id() % 8_000) as u16 * 4 + k
+    30_000 + (std::process::id() % 7_000) as u16 * 5 + k
 }
 
 /// An instance name of this test process's own.
@@ -441,4 +441,66 @@ fn the_links_floor_is_a_bare_zenoh_ping_pong_over_tls_or_plain_tcp() {
         assert!(out.stdout.contains(says), "{}", out.stdout);
         assert!(out.stdout.contains("one way p50"), "{}", out.stdout);
     }
+}
+
+#[test]
+fn agp_profile_across_a_tls_bridge_sets_the_bridged_hops_against_the_links_zenoh_floor() {
+    let ag = learned_ag("triangle");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let keys = dir.path().join("keys");
+    keygen(dir.path(), &keys);
+    let (a, b) = (instance("prof-rob"), instance("prof-pla"));
+    let endpoint = format!("tls/127.0.0.1:{}", port(4));
+    // Live sessions: both run until `agp down`; B's planner serves A's goals.
+    let robot = LaunchDir::new(
+        &robot_launch(&a, Some(&ag), &endpoint, &tls(&keys)).replace("\nends_run = true\n", "\n"),
+    );
+    let planner = LaunchDir::new(
+        &planner_launch(&b, &endpoint, &tls(&keys))
+            .replace("\"place\"", "\"serve\"")
+            .replace("\nends_run = true\n", "\n"),
+    );
+    let up_a = AgpUp::start(&robot.launch(), &[]);
+    let mut up_b = AgpUp::start(&planner.launch(), &[]);
+    up_b.wait_for_lines("serving the goals", 1, PLACE_TIMEOUT);
+    for goal in [["300", "150", "90"], ["0", "0", "0"]] {
+        let mut args = vec!["goal", "--instance", a.as_str(), "--place"];
+        args.extend(goal);
+        run_agp(robot.path(), &args, TIMEOUT).assert_success("a goal");
+    }
+    let profile = run_agp(
+        robot.path(),
+        &[
+            "profile",
+            "--instance",
+            &a,
+            "--seconds",
+            "1",
+            "--floor-seconds",
+            "0.3",
+        ],
+        TIMEOUT,
+    );
+    for (dir, name) in [(planner.path(), &b), (robot.path(), &a)] {
+        run_agp(dir, &["down", "--instance", name], TIMEOUT).assert_success("agp down");
+    }
+    let (end_b, end_a) = (up_b.wait(TIMEOUT), up_a.wait(TIMEOUT));
+    println!("{}\n{}", profile.stdout, profile.stderr);
+    profile.assert_success("agp profile across the TLS bridge");
+    assert!(
+        profile.stdout.contains("link floor (mutual TLS)"),
+        "{}",
+        profile.stdout
+    );
+    assert!(
+        profile
+            .stdout
+            .contains("the bridged hops against it (p50): estimator->planner "),
+        "{}",
+        profile.stdout
+    );
+    assert_eq!(end_a.status.code(), Some(0), "{}", end_a.stderr);
+    assert_eq!(end_b.status.code(), Some(0), "{}", end_b.stderr);
+    assert_eq!(count_instance_files(&a), 0, "files of `{a}` remain");
+    assert_eq!(count_instance_files(&b), 0, "files of `{b}` remain");
 }

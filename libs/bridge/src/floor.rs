@@ -50,9 +50,11 @@ fn open(endpoint: &Endpoint, tls: Option<&TlsKeys>) -> Result<zenoh::Session, Fl
 }
 
 /// The floor's figures: one-way latency (half a round trip), nanoseconds.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FloorFigures {
     pub round_trips: u64,
+    /// Every timed one-way figure, sorted.
+    pub one_way_ns: Vec<u64>,
     pub p50_ns: u64,
     pub p90_ns: u64,
     pub p99_ns: u64,
@@ -177,5 +179,6 @@ pub fn floor_ping(
         p90_ns: at(0.9),
         p99_ns: at(0.99),
         max_ns: at(1.0),
+        one_way_ns: one_way,
     })
 }

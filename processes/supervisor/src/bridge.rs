@@ -131,9 +131,18 @@ impl Security {
     }
 }
 
-/// `agp bridge floor`: a bare Zenoh ping-pong between this process and a copy of it over
-/// the loopback, on the transport the link would use.
-fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
+/// A bare Zenoh ping-pong between this process and a copy of it over the loopback, on the
+/// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, for
+/// `seconds` of timed round trips of `size` bytes: the locator and the figures.
+pub(crate) fn zenoh_floor(
+    tls: Option<&Path>,
+    seconds: f64,
+    size: usize,
+) -> Result<(String, agp_bridge::FloorFigures)> {
+    let security = Security {
+        tls: tls.map(Path::to_owned),
+        insecure: tls.is_none(),
+    };
     let (keys, scheme) = security.keys(Side::Planner)?;
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
@@ -141,21 +150,27 @@ fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
         .port();
     let locator = format!("{scheme}/127.0.0.1:{port}");
     let exe = std::env::current_exe().context("the path of agp")?;
-    let mut pong = std::process::Command::new(exe)
-        .args(["bridge", "floor-pong", "--listen", &locator])
+    let mut cmd = std::process::Command::new(exe);
+    cmd.args(["bridge", "floor-pong", "--listen", &locator])
         .args(security.args())
-        .stdin(std::process::Stdio::null())
-        .spawn()
-        .context("start the floor's pong end")?;
+        .stdin(std::process::Stdio::null());
+    // It dies with this process, however it ends.
+    let mut pong =
+        agp_runtime::children::spawn_guarded(&mut cmd).context("start the floor's pong end")?;
     let figures =
         agp_bridge::floor_ping(&Endpoint::connect(&locator)?, keys.as_ref(), seconds, size);
     let _ = pong.kill();
     let _ = pong.wait();
-    let f = figures?;
+    Ok((locator, figures?))
+}
+
+/// `agp bridge floor`.
+fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
+    let (locator, f) = zenoh_floor(security.tls.as_deref(), seconds, size)?;
     let us = |ns: u64| ns as f64 / 1e3;
     println!(
         "agp: Zenoh floor over {locator} ({}), {size} B samples, {} round trips: one way p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
-        if keys.is_some() {
+        if security.tls.is_some() {
             "mutual TLS"
         } else {
             "plain TCP"
@@ -167,6 +182,24 @@ fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
         us(f.max_ns)
     );
     Ok(0)
+}
+
+/// The bridge of a running process `pid`, from its command line: the key folder of its
+/// link (`None`: plain TCP), if it is an `agp bridge`.
+pub(crate) fn bridge_of_process(pid: u32) -> Option<Option<PathBuf>> {
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+    let args: Vec<String> = cmdline
+        .split(|b| *b == 0)
+        .map(|a| String::from_utf8_lossy(a).into_owned())
+        .collect();
+    if args.get(1).map(String::as_str) != Some("bridge") {
+        return None;
+    }
+    let tls = args
+        .windows(2)
+        .find(|w| w[0] == "--tls")
+        .map(|w| PathBuf::from(&w[1]));
+    Some(tls)
 }
 
 /// `agp bridge floor-pong`: the far end of `agp bridge floor`.

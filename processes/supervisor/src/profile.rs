@@ -898,6 +898,11 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         (!args.no_pause && !ended_early).then_some(&instance),
     )
     .context("the floor failed")?;
+    let link_floor = link_floor(
+        &name,
+        args.floor_seconds,
+        (!args.no_pause && !ended_early).then_some(&instance),
+    );
     let paused = floor.paused.map(|n| n as usize);
     let load = load_average();
     let report = Report {
@@ -909,6 +914,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
         floor_seconds: args.floor_seconds,
         paused,
         load,
+        link_floor,
     };
     report.print();
     if let Some(path) = &args.json {
@@ -933,6 +939,8 @@ struct Report {
     /// How many processes were paused while the floor ran (`None`: `--no-pause`).
     paused: Option<usize>,
     load: Option<[f64; 3]>,
+    /// The Zenoh floor of the instance's bridge, if it has one.
+    link_floor: Option<LinkFloor>,
 }
 
 impl Report {
@@ -1029,6 +1037,9 @@ impl Report {
             line("e2e", &f);
         }
         line("floor", &self.floor_figures);
+        if let Some(link) = &self.link_floor {
+            link.print(&hops, line);
+        }
         for r in &s.rows {
             if r.missing > 0 {
                 println!(
@@ -1075,6 +1086,7 @@ impl Report {
             "stages": list(Group::Stage),
             "end_to_end": end_to_end,
             "floor": floor.to_json(floor),
+            "link_floor": self.link_floor.as_ref().map(|l| l.to_json(&self.figures(Group::Hop))),
             "samples": self.caused(),
             "routes": routes,
             "sampling": {
@@ -1122,6 +1134,99 @@ const PLOT_BUCKETS_PER_DECADE: f64 = 20.0;
 
 /// One series of the plot: `(latency us at the bucket's geometric centre, share of the
 /// series' samples in the bucket)`.
+/// The hops a bridge carries, whichever side of it the profiled instance is: the estimate
+/// to the planner and its command back (physics and the estimator run on one side).
+const BRIDGED_HOPS: [&str; 2] = ["estimator->planner", "planner->physics"];
+
+/// The floor of a bridge's link: a bare Zenoh ping-pong on its transport.
+struct LinkFloor {
+    /// `mutual TLS` or `plain TCP`.
+    transport: &'static str,
+    figures: Figures,
+}
+
+impl LinkFloor {
+    fn ratio(&self, hops: &[Figures], name: &str) -> Option<f64> {
+        hops.iter()
+            .find(|h| h.name == name)
+            .and_then(|h| h.ratio(&self.figures))
+    }
+
+    fn print(&self, hops: &[Figures], line: impl Fn(&str, &Figures)) {
+        line("floor", &self.figures);
+        let ratios: Vec<String> = BRIDGED_HOPS
+            .iter()
+            .filter_map(|n| self.ratio(hops, n).map(|r| format!("{n} {r:.1}x")))
+            .collect();
+        println!(
+            "  link floor ({}): bare Zenoh ping-pong between two `agp` processes over the bridge's transport on the loopback, one-way = round trip / 2, after the iceoryx2 floor; the bridged hops against it (p50): {}",
+            self.transport,
+            if ratios.is_empty() {
+                "none sampled".to_owned()
+            } else {
+                ratios.join(", ")
+            }
+        );
+    }
+
+    fn to_json(&self, hops: &[Figures]) -> serde_json::Value {
+        let mut v = self.figures.to_json(&self.figures);
+        v["transport"] = serde_json::json!(self.transport);
+        v["hops_ratio_to_link_floor_p50"] = BRIDGED_HOPS
+            .iter()
+            .map(|n| ((*n).to_owned(), serde_json::json!(self.ratio(hops, n))))
+            .collect::<serde_json::Map<_, _>>()
+            .into();
+        v
+    }
+}
+
+/// The Zenoh floor of instance `name`'s bridge, if one of its processes is an `agp bridge`
+/// (its transport and keys read from its command line), measured for `seconds` with the
+/// pipeline of `pause` paused meanwhile. A floor that cannot be measured is said, and the
+/// profile goes on without it.
+fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<LinkFloor> {
+    let r = control_client::ask(name, agp_shared_types::ControlKind::Status).ok()?;
+    let tls = control::StatusReport::new(name, &r)
+        .processes
+        .iter()
+        .filter_map(|p| p.pid)
+        .find_map(crate::bridge::bridge_of_process)?;
+    let measured = (|| -> Result<(String, agp_bridge::FloorFigures)> {
+        let mut lease = pause
+            .map(|i| PauseLease::take(i, Duration::from_secs_f64(seconds) + LEASE_MARGIN))
+            .transpose()
+            .context("cannot pause the pipeline for the link floor")?;
+        // The lease outlasts the floor by LEASE_MARGIN; it is given back right after.
+        let floor = crate::bridge::zenoh_floor(tls.as_deref(), seconds, 64);
+        if let Some(lease) = &mut lease {
+            lease.release()?;
+        }
+        floor
+    })();
+    match measured {
+        Ok((locator, f)) => {
+            let mut h = histogram();
+            for ns in &f.one_way_ns {
+                h.saturating_record(*ns);
+            }
+            let transport = if locator.starts_with("tls/") {
+                "mutual TLS"
+            } else {
+                "plain TCP"
+            };
+            Some(LinkFloor {
+                transport,
+                figures: Figures::new("link_floor", &h),
+            })
+        }
+        Err(e) => {
+            eprintln!("agp profile: the link floor of instance `{name}`'s bridge failed: {e:#}");
+            None
+        }
+    }
+}
+
 fn buckets(h: &Histogram<u64>, lo_ns: f64, hi_ns: f64) -> Vec<(f64, f64)> {
     let step = 10f64.powf(1.0 / PLOT_BUCKETS_PER_DECADE);
     let total = h.len().max(1) as f64;
@@ -1347,6 +1452,7 @@ mod tests {
             floor_seconds: 1.0,
             paused: None,
             load: None,
+            link_floor: None,
         };
         let v = report.to_json();
         let names = |k: &str| -> Vec<String> {
