@@ -1128,6 +1128,7 @@ fn remote_bridge_args(
     check: &mut Checker<'_>,
     process: &str,
     raw: &Spanned<RawRemote>,
+    base: &Path,
 ) -> Vec<String> {
     let r = raw.as_ref();
     let mut faults = Vec::new();
@@ -1142,7 +1143,6 @@ fn remote_bridge_args(
         }
     };
     let (flag, endpoint) = match (&r.listen, &r.connect) {
-    base: &Path,
         (Some(l), None) => ("--listen", l.clone()),
         (None, Some(c)) => ("--connect", c.clone()),
         _ => {
@@ -1156,6 +1156,7 @@ fn remote_bridge_args(
     {
         faults.push(e.to_string());
     }
+    let security = remote_security(r, side, &endpoint, base, &mut faults);
     let topics = r
         .topics
         .as_ref()
@@ -1170,7 +1171,6 @@ fn remote_bridge_args(
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
     {
-    let security = remote_security(r, side, &endpoint, base, &mut faults);
         faults.push(format!(
             "bad `remote.link` `{link}`: 1 to 64 letters, digits, `-` and `_`"
         ));
@@ -1913,6 +1913,7 @@ stop_grace_ms = 500
             "all",
             "--link",
             "agp",
+            "--insecure",
         ];
         assert_eq!(planner.args, expected);
         // Physics runs here: this supervisor owns the goals.
@@ -1927,12 +1928,12 @@ stop_grace_ms = 500
             "--side",
             "planner",
             "--connect",
-            "--insecure",
             "tcp/127.0.0.1:7447",
             "--topics",
             "ir_frames,motor_commands",
             "--link",
             "lab2",
+            "--insecure",
         ];
         assert_eq!(config.processes[1].args, expected);
         // Physics runs under the far supervisor, which owns the goals.
@@ -1947,7 +1948,6 @@ stop_grace_ms = 500
             (
                 "role = \"planner\"",
                 "role = \"camera\"",
-            "--insecure",
                 "unknown remote role `camera`",
             ),
             (
@@ -2000,7 +2000,6 @@ stop_grace_ms = 500
             "{shown}"
         );
     }
-}
 
     #[test]
     fn a_remote_over_tls_takes_its_key_folder_from_beside_the_launch_file() {
@@ -2069,3 +2068,4 @@ stop_grace_ms = 500
             assert!(shown.contains(says), "{shown}");
         }
     }
+}
