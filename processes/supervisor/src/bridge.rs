@@ -225,8 +225,7 @@ pub(crate) fn insecure_warning(locator: &str) -> String {
 fn keygen(dir: &Path, hosts: &[String]) -> Result<u8> {
     let written = agp_bridge::keygen(dir, hosts)?;
     println!(
-        "agp: made the bridge's keys in {} (give both ends this folder: `tls = \"{}\"`, or `--tls {}`):",
-        dir.display(),
+        "agp: made the bridge's keys in {} (give both ends this folder: `--tls {}`, or `tls = \"DIR\"` in a launch file's `remote`, relative to that file):",
         dir.display(),
         dir.display()
     );
