@@ -106,7 +106,10 @@ mod tests {
         let cases = [
             ("examples/python-planner/../../results", "results"),
             ("a/..", "."),
-            ("examples/python-planner/../../results/x.json", "results/x.json"),
+            (
+                "examples/python-planner/../../results/x.json",
+                "results/x.json",
+            ),
             ("../bad/../bad/typo.toml", "../bad/typo.toml"),
             ("/a/./b/../c", "/a/c"),
             ("/../x", "/x"),
@@ -115,7 +118,11 @@ mod tests {
             ("a/b/", "a/b"),
         ];
         for (given, shown) in cases {
-            assert_eq!(lexically_normal(Path::new(given)), Path::new(shown), "{given}");
+            assert_eq!(
+                lexically_normal(Path::new(given)),
+                Path::new(shown),
+                "{given}"
+            );
         }
     }
 }
