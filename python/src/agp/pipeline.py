@@ -201,7 +201,8 @@ def read_str(field) -> str:
 
 
 def spin_seconds(wait: str) -> float:
-    """How long a wait polls before it blocks, by `AGP_WAIT` as the Rust processes read it:
+    """How long a wait polls before it blocks, by `AGP_PY_WAIT` (the Python planner's alone),
+    else `AGP_WAIT`, as the Rust processes read it:
     `block` 0, `spin` and `yield` (always poll) 1 s slices, `spin-then-block:US` US
     microseconds, and the default (unset or unknown) 200 us."""
     if wait == "block":
@@ -243,7 +244,7 @@ class Ring:
         self.seq = 0  # this planner's events
         self.sent_ns = 0
         self.steps = 0
-        self.spin_s = spin_seconds(os.environ.get("AGP_WAIT", ""))
+        self.spin_s = spin_seconds(os.environ.get("AGP_PY_WAIT", os.environ.get("AGP_WAIT", "")))
         self._wait(after_step=-1)
 
     # -- samples -------------------------------------------------------------------------------
