@@ -26,8 +26,8 @@ fn launch(instance: &str) -> String {
         "instance = \"{instance}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--step-log\", \"steps.log\"]\n\
          restart = {{ policy = \"on-failure\", max_restarts = 2, backoff_ms = 10 }}\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"24\", \"--push-ms\", \"2000\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\n\
+         args = [\"--pushes\", \"24\", \"--push-ms\", \"2000\"]\n\
          restart = {{ policy = \"on-failure\", max_restarts = 2, backoff_ms = 10 }}\n\
          ends_run = true\n"
     )

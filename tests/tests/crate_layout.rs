@@ -176,3 +176,68 @@ fn the_estimator_and_the_planners_code_never_reads_the_objects_truth_from_the_sc
         found.join("\n")
     );
 }
+
+/// The agp crates `name` links, directly or through others: its `[dependencies]` and
+/// theirs (dev- and build-dependencies link into tests and build scripts only).
+fn linked(name: &str) -> std::collections::BTreeSet<String> {
+    let root = workspace_root();
+    let members = members();
+    let normal = |crate_name: &str| -> Vec<String> {
+        let (dir, _) = members
+            .get(crate_name)
+            .unwrap_or_else(|| panic!("no crate `{crate_name}`"));
+        let text = std::fs::read_to_string(root.join(dir).join("Cargo.toml"))
+            .unwrap_or_else(|e| panic!("{dir}/Cargo.toml: {e}"));
+        let man: toml::Table = text.parse().expect("a member manifest is TOML");
+        man.get("dependencies")
+            .and_then(|t| t.as_table())
+            .map(|t| {
+                t.keys()
+                    .filter(|d| d.starts_with("agp-"))
+                    .cloned()
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let mut seen = std::collections::BTreeSet::new();
+    let mut todo = normal(name);
+    while let Some(d) = todo.pop() {
+        if seen.insert(d.clone()) {
+            todo.extend(normal(&d));
+        }
+    }
+    seen
+}
+
+#[test]
+fn the_planner_process_decides_and_links_no_perception_and_no_ground_truth_reader() {
+    // ARCHITECTURE.md: the planner reads the estimator's estimates, never runs the
+    // estimator's perception (the scripted drive that did is the harness's
+    // `agp-scripted-drive`), and never reads ground truth but through the oracle's port.
+    let members = members();
+    let planner = members
+        .iter()
+        .find(|(_, (dir, _))| dir == "processes/planner")
+        .map(|(name, _)| name.clone())
+        .expect("the planner process crate");
+    let links = linked(&planner);
+    for forbidden in ["agp-perception", "agp-harness", "agp-physics"] {
+        assert!(
+            !links.contains(forbidden),
+            "`{planner}` links `{forbidden}` (all it links: {links:?})"
+        );
+    }
+    let mut found = Vec::new();
+    for (path, text) in sources("processes/planner/src") {
+        for (n, line) in text.lines().enumerate() {
+            if line.contains("agp_perception") || line.contains("ObjectTracker") {
+                found.push(format!("{}:{}: {}", path.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "the planner process's code names perception:\n{}",
+        found.join("\n")
+    );
+}

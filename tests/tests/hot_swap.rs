@@ -23,8 +23,8 @@ fn launch(instance: &str) -> String {
     format!(
         "instance = \"{instance}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--step-log\", \"steps.log\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\n\
+         args = [\"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
          ends_run = true\n"
     )
 }
@@ -230,7 +230,7 @@ fn watch_swaps_in_each_new_build_and_rolls_back_one_that_dies() {
     assert!(up.status.success(), "{}{}", up.stdout, up.stderr);
     let _down = DownOnPanic::new(dir.path(), name);
     let build = dir.path().join("my-planner");
-    install(&bin_path("agp-planner"), &build);
+    install(&bin_path("agp-scripted-drive"), &build);
     let build_arg = build.to_str().expect("a UTF-8 path");
     let mut watch = AgpUp::spawn(
         dir.path(),
@@ -248,7 +248,7 @@ fn watch_swaps_in_each_new_build_and_rolls_back_one_that_dies() {
     );
     // The build there now is swapped in at once, and the next one when it lands.
     watch.wait_for_lines("\"epoch\":1,", 1, TIMEOUT);
-    install(&bin_path("agp-planner"), &build);
+    install(&bin_path("agp-scripted-drive"), &build);
     watch.wait_for_lines("\"epoch\":2,", 1, TIMEOUT);
     let driving = status_entry(&status_until(dir.path(), name, |_| true), "planner")["pid"].clone();
 
@@ -262,7 +262,7 @@ fn watch_swaps_in_each_new_build_and_rolls_back_one_that_dies() {
     assert_eq!(status_entry(&status, "planner")["pid"], driving, "{status}");
 
     // The fixed build goes in (epoch 3 went to the refused one).
-    install(&bin_path("agp-planner"), &build);
+    install(&bin_path("agp-scripted-drive"), &build);
     watch.wait_for_lines("\"epoch\":4,", 1, TIMEOUT);
     watch.signal(libc::SIGINT);
     let end = watch.wait(TIMEOUT);

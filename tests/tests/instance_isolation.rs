@@ -202,8 +202,8 @@ fn no_file_or_segment_of_a_running_pipeline_is_writable_by_group_or_others() {
     let dir = LaunchDir::new(&format!(
         "instance = \"{name}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\n\
+         args = [\"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
          ends_run = true\n"
     ));
     let mut up = AgpUp::start(&dir.launch(), &[]);

@@ -173,8 +173,8 @@ fn a_stranger_process_cannot_drive_physics_and_the_run_completes() {
     let dir = LaunchDir::new(&format!(
         "instance = \"{name}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"6\", \"--push-ms\", \"1500\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\n\
+         args = [\"--pushes\", \"6\", \"--push-ms\", \"1500\"]\n\
          ends_run = true\n"
     ));
     let mut up = AgpUp::start(&dir.launch(), &[]);

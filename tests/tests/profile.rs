@@ -23,8 +23,8 @@ fn launch(instance: &str) -> String {
     format!(
         "instance = \"{instance}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nenv = {{ AGP_WAIT = \"yield\" }}\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\nenv = {{ AGP_WAIT = \"yield\" }}\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\nenv = {{ AGP_WAIT = \"yield\" }}\n\
+         args = [\"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
          ends_run = true\n"
     )
 }

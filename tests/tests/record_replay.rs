@@ -21,13 +21,13 @@ const TIMEOUT: Duration = Duration::from_secs(120);
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// A short lockstep run recorded into `run.mcap`: physics, the estimator serving a learned
-/// triangle, and the scripted drive (two pushes, each from a reset). `agp up` starts the
+/// triangle, and a planner: the scripted drive (two pushes, each from a reset) or a task. `agp up` starts the
 /// recorder first and the others once it has subscribed (its file exists); the planner
 /// (through `sh`) also waits for the test's own ground-truth reader (`truth.ready`).
 /// Nothing runs at another priority: the recorder's buffers (`agp_runtime::TAP_DEPTH`)
 /// hold seconds of the ring at full lockstep speed.
-fn launch(instance: &str, ag: &std::path::Path, planner_args: &str) -> String {
-    let planner = bin_path("agp-planner");
+fn launch(instance: &str, ag: &std::path::Path, planner: &str, planner_args: &str) -> String {
+    let planner = bin_path(planner);
     let estimator = bin_path("agp-estimator");
     format!(
         r#"instance = "{instance}"
@@ -138,7 +138,8 @@ fn a_recorded_lockstep_run_holds_every_topic_and_replays_to_the_same_final_pose_
     let dir = LaunchDir::new(&launch(
         &name,
         &ag,
-        "--mode script --pushes 2 --push-ms 300",
+        "agp-scripted-drive",
+        "--pushes 2 --push-ms 300",
     ));
     let stop = Arc::new(AtomicBool::new(false));
     let reader = truth_reader(
@@ -270,7 +271,12 @@ fn each_estimate_names_the_newest_planner_event_the_estimator_took_in() {
     let _alone = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let ag = learned_ag("triangle");
     let name = format!("rev{}", std::process::id() % 100_000);
-    let launch = launch(&name, &ag, "--mode place --planner affordance");
+    let launch = launch(
+        &name,
+        &ag,
+        "agp-planner",
+        "--mode place --planner affordance",
+    );
     let dir = LaunchDir::new(&launch);
     std::fs::write(dir.path().join("truth.ready"), b"").expect("the ready marker");
     let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);

@@ -305,8 +305,8 @@ fn pipeline(instance: &str) -> String {
     format!(
         "instance = \"{instance}\"\nscenario = \"square\"\n\n[clock]\nmode = \"lockstep\"\n\n\
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
-         args = [\"--mode\", \"script\", \"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
+         [[process]]\nname = \"planner\"\nexec = \"agp-scripted-drive\"\n\
+         args = [\"--pushes\", \"100000\", \"--push-ms\", \"200\"]\n\
          ends_run = true\n"
     )
 }

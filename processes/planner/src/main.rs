@@ -9,25 +9,16 @@ mod task_mode;
 
 use std::time::Duration;
 
-use agp_perception::{ObjectTracker, TrackerConfig};
-use agp_planning::{PlannerKind, PushPhase, PushRoutine, PushSettings};
+use agp_planning::PlannerKind;
 use agp_runtime::control_client::ControlClient;
-use agp_runtime::{
-    AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess, alloc_count,
-    install_shutdown_handler,
-};
-use agp_shared_types::angle::wrap_angle;
-use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns, stage};
-use agp_world::{Experimenter, RobotDescription, Scenario, ScenarioBrief};
+use agp_runtime::{AgpIpc, Instance, LockstepDriver, alloc_count, install_shutdown_handler};
+use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns};
+use agp_world::Scenario;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Mode {
-    /// A scripted drive straight against physics: push the object from a few sides,
-    /// inferring contact from the IR readings, and report what the robot sensed. No
-    /// estimator is needed; the run ends when the script does.
-    Script,
     /// The learning phase (benchmarks.md section 1) over the real pipeline: circle the
     /// object for its shape, then push it from every side at each alpha, telling the
     /// estimator each step of the protocol; ends when the estimator reports the gradients
@@ -61,17 +52,14 @@ struct Args {
     /// Built-in scenario or scenario file (the same physics runs).
     #[arg(long, env = "AGP_SCENARIO", default_value = "triangle")]
     scenario: String,
-    /// Clock mode of the pipeline: the script needs `lockstep`.
+    /// Clock mode of the pipeline: learning needs `lockstep`.
     #[arg(long, env = "AGP_CLOCK", default_value = "lockstep")]
     clock: String,
-    /// What to do.
-    #[arg(long, value_enum, default_value = "script")]
+    /// What to do. (The scripted drive of earlier builds is the harness's
+    /// `agp-scripted-drive`: it perceives, which the planner never does.)
+    #[arg(long, value_enum)]
     mode: Mode,
-    /// Script: number of pushes, from sides evenly spread around the object.
-    #[arg(long, default_value_t = 4)]
-    pushes: u32,
-    /// Push duration after contact, milliseconds (default: 2000 in `script`, 500 in
-    /// `learn`, the learning bench's).
+    /// Push duration after contact, milliseconds (default: 500, the learning bench's).
     #[arg(long)]
     push_ms: Option<u64>,
     /// Learn: trials per alpha, evenly spread round the object (60: one every 6 deg).
@@ -126,9 +114,9 @@ struct Args {
     check: bool,
 }
 
-/// Why these arguments cannot run on the pipeline's clock, if they cannot: the scripted
-/// drive and the learning phase reset the world between steps and time their pushes by
-/// steps, so they need the lockstep clock; the tasks run on either.
+/// Why these arguments cannot run on the pipeline's clock, if they cannot: the learning
+/// phase resets the world between steps and times its pushes by steps, so it needs the
+/// lockstep clock; the tasks run on either.
 fn clock_refusal(args: &Args) -> Option<String> {
     if args.clock == "lockstep" {
         return None;
@@ -140,7 +128,6 @@ fn clock_refusal(args: &Args) -> Option<String> {
         ));
     }
     match args.mode {
-        Mode::Script => Some("`--mode script` needs the lockstep clock".to_owned()),
         Mode::Learn => Some("`--mode learn` (the learning phase) needs the lockstep clock".to_owned()),
         Mode::Place | Mode::Trajectory | Mode::Serve if args.learn_if_missing => Some(
             "`--learn-if-missing` may run the learning phase, which needs the lockstep clock: learn first (`agp up` with launch.toml, or `agp bench learn`), then run without it".to_owned(),
@@ -281,14 +268,12 @@ fn run() -> Result<()> {
     install_shutdown_handler();
     let full = Scenario::resolve(&args.scenario)?;
     // The planner reads the brief (the name, the robot, the task), and the experimenter's
-    // knowledge for the learning protocol and the scripted drive; nothing else of the
-    // object.
+    // knowledge for the learning protocol; nothing else of the object.
     let (scenario, experimenter) = (full.brief(), full.experimenter());
     drop(full);
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
     match args.mode {
-        Mode::Script => script(&instance, &scenario, experimenter, &args),
         Mode::Learn => {
             let settings = learn_mode::LearnSettings::new(
                 args.trials_per_alpha,
@@ -363,107 +348,6 @@ fn run() -> Result<()> {
     }
 }
 
-fn script(
-    instance: &Instance,
-    scenario: &ScenarioBrief,
-    experimenter: Experimenter,
-    args: &Args,
-) -> Result<()> {
-    let robot = RobotDescription::epuck();
-    // Without an estimator the scripted drive perceives for itself, with its code.
-    let mut perception = ObjectTracker::new(&robot, TrackerConfig::default());
-    let mut driver = match LockstepDriver::connect(
-        instance,
-        "planner",
-        args.epoch,
-        TruthAccess::SensesOnly,
-        TIMEOUT,
-    ) {
-        Ok(d) => d,
-        Err(DriveError::Shutdown) => return Ok(()),
-        Err(e) => return Err(e).context("cannot reach physics"),
-    };
-    let mut swap_in = match SwapIn::start(instance, &mut driver) {
-        Ok(s) => s,
-        Err(e) if agp_runtime::shutdown_requested() => {
-            let _ = e;
-            return Ok(());
-        }
-        Err(e) => return Err(e),
-    };
-    let push_ms = args.push_ms.unwrap_or(2000);
-    let settings = PushSettings {
-        push_duration: push_ms as f64 * 1e-3,
-        ..PushSettings::default()
-    };
-    let obj = experimenter.placement;
-    // Nothing tells how far the object reaches: start outside anything the grid holds.
-    let radius = agp_planning::max_object_reach_m() + robot.body_radius + 0.03;
-    println!(
-        "scripted drive: {} pushes of `{}`, {} ms each",
-        args.pushes, scenario.name, push_ms
-    );
-    let mut k = 0;
-    while k < args.pushes {
-        let side = obj.theta + std::f64::consts::TAU * k as f64 / args.pushes.max(1) as f64;
-        let (x, y) = (obj.x + radius * side.cos(), obj.y + radius * side.sin());
-        let heading = wrap_angle(side + std::f64::consts::PI);
-        // The learning phase puts the object back before each trial; so does the script.
-        let push = (|| -> Result<(), DriveError> {
-            let frame = *driver.reset(obj, Pose2::new(x, y, heading))?;
-            let start_odo = frame.odometry;
-            let mut routine = PushRoutine::new(settings, frame.sim_time_s);
-            perception.reset();
-            let mut peak = 0f32;
-            loop {
-                let f = *driver.frame();
-                peak = peak.max(f.ir_raw[0].max(f.ir_raw[7]));
-                if let PushPhase::Done { contact } = routine.phase() {
-                    let odo = f.odometry;
-                    println!(
-                        "  push {}/{} from {:>5.1} deg: {}, front IR peak {:>6.0}, robot travelled {:>5.1} mm by odometry",
-                        k + 1,
-                        args.pushes,
-                        side.to_degrees(),
-                        if contact {
-                            "contact inferred from IR"
-                        } else {
-                            "no contact"
-                        },
-                        peak,
-                        (odo.x - start_odo.x).hypot(odo.y - start_odo.y) * 1e3
-                    );
-                    return Ok(());
-                }
-                perception.observe(f.ir_sample, &f.ir_raw, f.odometry, f.fix, f.fix_seq);
-                let (l, r) = routine.step(
-                    perception.front_gap(),
-                    perception.stalled(),
-                    f.sim_time_s,
-                    f.ir_sample,
-                );
-                let next = driver.step(l, r)?;
-                if let Some(s) = swap_in.take() {
-                    let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
-                    s.driving(applied)
-                        .map_err(|e| DriveError::Port(format!("{e:#}")))?;
-                }
-            }
-        })();
-        match push {
-            Ok(()) => k += 1,
-            Err(DriveError::PhysicsRestarted) => {
-                // A new world: this push again, from its reset.
-                println!("  physics restarted: push {} again", k + 1);
-            }
-            Err(DriveError::Shutdown) => return Ok(()),
-            Err(e) => return Err(e.into()),
-        }
-    }
-    println!("scripted drive done");
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -490,7 +374,6 @@ mod tests {
         }
         for words in [
             &["--mode", "learn"][..],
-            &["--mode", "script"][..],
             &["--mode", "place", "--learn-if-missing"][..],
         ] {
             let mut w = vec!["--clock", "realtime"];
