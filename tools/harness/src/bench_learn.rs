@@ -150,6 +150,8 @@ pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
 /// by [`merge`] into the run's (written to `--json` if given).
 pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     let wall = Instant::now();
+    // The learning polls the stop flag at every simulated step.
+    let _checked = crate::stop::checked();
     let all_seeds = args.seeds.all();
     let seeds = args.seeds.mine();
     let cfg = config(args, seeds[0])?;
@@ -206,6 +208,7 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     // side on the machine's cores, and are reported in the order given.
     let learned = learn_objects(&work, &bar);
     let mut docs = Vec::with_capacity(seeds.len());
+    let mut learned_count = 0;
     let mut learned = learned.into_iter();
     for &seed in &seeds {
         let cfg = config(args, seed)?;
@@ -216,8 +219,12 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         let mut missed = Vec::new();
         for job in &jobs {
             let outcome = learned.next().context("an object without its outcome")?;
-            let (report, wall_s) =
-                outcome.with_context(|| format!("cannot learn `{}`", job.scenario.name))?;
+            let (report, wall_s) = match outcome {
+                // Stopped by a signal: the objects learned are kept, this one is not.
+                Err(LearnBenchError::Stopped { .. }) if crate::stop::requested() => continue,
+                other => other.with_context(|| format!("cannot learn `{}`", job.scenario.name))?,
+            };
+            learned_count += 1;
             let (ag_path, plot_path) = write_files(&out, job, &cfg, &report)?;
             if all_seeds.len() > 1 && seed == all_seeds[0] {
                 // The run's first seed's gradient is also where `agp bench place` looks by
@@ -249,6 +256,10 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
                 object_json(job, &report, wall_s, &ag_path, &plot_path),
             );
         }
+        if objects.is_empty() {
+            // Only after a stop: no object of this seed was learned.
+            continue;
+        }
         let wall_s = objects
             .values()
             .map(|o| number_at(o, &["wall_time_s"]))
@@ -268,6 +279,9 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         }));
     }
     bar.finish_and_clear();
+    if crate::stop::requested() {
+        return Err(partial(args, &docs, all_seeds, learned_count, work.len()));
+    }
 
     let parts = run_parts(&docs, "learn", learn_signature, all_seeds)?;
     let mut doc = assemble(&parts, args.seeds.shard);
@@ -491,6 +505,26 @@ fn summary_table(doc: &Value) -> String {
     out
 }
 
+/// The partial JSON of a learning stopped by a signal: the (seed, object) pairs learned
+/// (their AG files are written), written by `crate::stop::write_partial`.
+fn partial(
+    args: &BenchLearnArgs,
+    docs: &[Value],
+    all_seeds: Vec<u64>,
+    learned: usize,
+    planned: usize,
+) -> anyhow::Error {
+    let doc = if docs.is_empty() {
+        json!({ "benchmark": "learn", "seeds": all_seeds, "per_seed": [] })
+    } else {
+        match run_parts(docs, "learn", |_| Value::Null, all_seeds) {
+            Ok(parts) => assemble(&parts, args.seeds.shard),
+            Err(e) => return e.into(),
+        }
+    };
+    crate::stop::write_partial(doc, args.json.as_deref(), "learn", learned, planned)
+}
+
 /// Learns every (seed, object) of `work`, side by side on the machine's cores; each
 /// object's report with its own wall time (seconds), in the order of `work`.
 fn learn_objects(
@@ -498,6 +532,11 @@ fn learn_objects(
     bar: &ProgressBar,
 ) -> Vec<Result<(ObjectReport, f64), LearnBenchError>> {
     side_by_side(work, |(cfg, job)| {
+        if crate::stop::requested() {
+            return Err(LearnBenchError::Stopped {
+                object: job.scenario.name.clone(),
+            });
+        }
         let started = Instant::now();
         let mut shown = 0;
         let report = run_object(&job.scenario, cfg, &mut |p| {

@@ -68,7 +68,7 @@ pub fn missed_targets(doc: &Value) -> Vec<String> {
     let mut missed = Vec::new();
     let t = &doc["trajectory"];
     let ratio = num(t, &["ratio"]);
-    if !(ratio <= TARGET_TRAJECTORY_RATIO) {
+    if ratio.is_nan() || ratio > TARGET_TRAJECTORY_RATIO {
         missed.push(format!(
             "trajectory ratio affordance / baseline <= {TARGET_TRAJECTORY_RATIO}, overall: {ratio:.2}"
         ));
@@ -76,7 +76,7 @@ pub fn missed_targets(doc: &Value) -> Vec<String> {
     if let Some(paths) = t["paths"].as_object() {
         for (name, p) in paths {
             let r = num(p, &["ratio"]);
-            if !(r <= TARGET_TRAJECTORY_RATIO) {
+            if r.is_nan() || r > TARGET_TRAJECTORY_RATIO {
                 missed.push(format!(
                     "trajectory ratio <= {TARGET_TRAJECTORY_RATIO} on the {name} path: {r:.2}"
                 ));
@@ -88,7 +88,7 @@ pub fn missed_targets(doc: &Value) -> Vec<String> {
             &doc["place"][object],
             &["planners", PlannerKind::Affordance.name(), "success_rate"],
         );
-        if !(rate >= TARGET_PLACE_SUCCESS) {
+        if rate.is_nan() || rate < TARGET_PLACE_SUCCESS {
             missed.push(format!(
                 "placement success of the affordance planner >= {:.0} % on {object}: {:.0} %",
                 100.0 * TARGET_PLACE_SUCCESS,

@@ -295,6 +295,9 @@ pub(crate) fn run_episodes(
                 }
                 match runner.episode(planner, task, config) {
                     Ok(r) => {
+                        // Checkpointed first: once the line says an episode is done, the
+                        // JSON on disk holds it.
+                        note_done(index, &r, started.elapsed().as_secs_f64());
                         if plan.bar.is_hidden() {
                             eprintln!(
                                 "bench {}: planner {planner}, seed {seed}: {label} done ({} of {}, {})",
@@ -304,7 +307,6 @@ pub(crate) fn run_episodes(
                                 r.end.name()
                             );
                         }
-                        note_done(index, &r, started.elapsed().as_secs_f64());
                         results.push(r);
                         plan.bar.inc(1);
                     }

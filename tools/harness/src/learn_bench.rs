@@ -220,6 +220,13 @@ pub enum LearnBenchError {
         /// The cause.
         source: LearnerBuildError,
     },
+    /// A stop signal arrived (`agp bench`, see `crate::stop`): the object's learning ended
+    /// unfinished.
+    #[error("`{object}`: stopped by a signal before it was learned")]
+    Stopped {
+        /// The scenario's name.
+        object: String,
+    },
     /// The robot, approaching for the shape circling, never saw the object.
     #[error(
         "`{object}`: the robot approached for {SHAPE_APPROACH_TIMEOUT_S} s and its IR never saw the object"
@@ -718,6 +725,12 @@ impl LearnWorld for BenchWorld {
     }
 
     fn step(&mut self, left_mps: f64, right_mps: f64) -> Result<(), LearnBenchError> {
+        // A stop (`agp bench` got SIGINT, SIGTERM or SIGHUP) ends the learning here.
+        if crate::stop::requested() {
+            return Err(LearnBenchError::Stopped {
+                object: self.name.clone(),
+            });
+        }
         self.sim.step(left_mps, right_mps);
         if self.watch_touch && self.touch_obj.is_none() && self.sim.in_contact() {
             let o = self.sim.object_pose();

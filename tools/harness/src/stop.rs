@@ -7,7 +7,8 @@
 //! episodes finished are written as a JSON marked `"partial": true`, and `agp` exits
 //! 128 + N. A second signal forces the exit at once: a watcher thread kills the bench's
 //! children, removes the files of every instance of this bench (`bench-<pid>-*`) and
-//! exits 128 + N. Phases that run in-process and poll no flag (the learning, `agp bench
+//! exits 128 + N. The learning (in-process) polls the flag at every simulated step and
+//! writes the (seed, object) pairs it learned. Phases that poll no flag (`agp bench
 //! adapt`) hold no pipeline and no file: the first signal ends them at once.
 //!
 //! [`sweep_stale`] removes the instances of benches that died without cleaning (`kill
@@ -135,7 +136,7 @@ fn watch() {
         if !said && count < 2 && CHECKED.load(Ordering::SeqCst) > 0 {
             said = true;
             eprintln!(
-                "agp bench: {}: stopping the pipelines and writing what finished (a second signal stops at once)",
+                "agp bench: {}: stopping, then writing what finished (a second signal stops at once)",
                 signal_name(sig)
             );
         }
@@ -427,7 +428,7 @@ fn write_atomically(path: &Path, doc: &Value) -> Result<()> {
 }
 
 /// Marks `doc` partial: `"partial": true`, `"partial_reason"`, the episodes finished and
-/// planned.
+/// planned (for `learn`: the (seed, object) learnings).
 fn mark_partial(doc: &mut Value, reason: &str, finished: usize, planned: usize) {
     doc["partial"] = json!(true);
     doc["partial_reason"] = json!(reason);
@@ -501,8 +502,13 @@ pub fn write_partial(
     slot.take();
     match write_atomically(&path, &doc) {
         Ok(()) => eprintln!(
-            "agp bench {benchmark}: {}: {finished} of {planned} episodes finished, partial JSON {}",
+            "agp bench {benchmark}: {}: {finished} of {planned} {} finished, partial JSON {}",
             stopped.reason(),
+            if benchmark == "learn" {
+                "(seed, object) learnings"
+            } else {
+                "episodes"
+            },
             path.display()
         ),
         Err(e) => eprintln!(

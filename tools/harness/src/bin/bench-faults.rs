@@ -990,6 +990,29 @@ fn bench_files_of(pid: u32) -> usize {
         + count(&base, &format!("bench-{pid}-"))
 }
 
+/// A stopped bench's JSON: `None` when it wrote none; else the episodes it holds, or why
+/// it is unreadable or wrong (not marked partial, `episodes_finished` not what it holds).
+fn read_partial_json(path: &Path) -> Option<Result<u64, String>> {
+    path.is_file().then(|| {
+        let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+        let v: Value = serde_json::from_str(&text).map_err(|e| format!("not JSON: {e}"))?;
+        if v["partial"] != true {
+            return Err("not marked partial".to_owned());
+        }
+        let held: u64 = v["planners"]
+            .as_object()
+            .map(|m| m.values().filter_map(|p| p["episodes"].as_u64()).sum())
+            .unwrap_or(0);
+        if v["episodes_finished"].as_u64() != Some(held) {
+            return Err(format!(
+                "episodes_finished {} but {held} held",
+                v["episodes_finished"]
+            ));
+        }
+        Ok(held)
+    })
+}
+
 /// The benchmark phase: `args.bench_signals` benches stopped by a signal at a random
 /// moment (0.3 to 8 s after their start: setting up, placing, between episodes).
 fn bench_signal_phase(
@@ -1101,25 +1124,7 @@ fn bench_signal_phase(
             .count();
         reap_children(bins, &pids, Duration::ZERO);
         let stderr = std::fs::read_to_string(&err_path).unwrap_or_default();
-        let json_path = dir.join("place.json");
-        let json = json_path.is_file().then(|| {
-            let text = std::fs::read_to_string(&json_path).map_err(|e| e.to_string())?;
-            let v: Value = serde_json::from_str(&text).map_err(|e| format!("not JSON: {e}"))?;
-            if v["partial"] != true {
-                return Err("not marked partial".to_owned());
-            }
-            let held: u64 = v["planners"]
-                .as_object()
-                .map(|m| m.values().filter_map(|p| p["episodes"].as_u64()).sum())
-                .unwrap_or(0);
-            if v["episodes_finished"].as_u64() != Some(held) {
-                return Err(format!(
-                    "episodes_finished {} but {held} held",
-                    v["episodes_finished"]
-                ));
-            }
-            Ok(held)
-        });
+        let json = read_partial_json(&dir.join("place.json"));
         let stop = BenchStop {
             signal: sig,
             to_group,
