@@ -391,3 +391,32 @@ fn the_next_bench_removes_what_a_bench_killed_with_sigkill_left_and_says_so() {
     );
     assert!(bench_files(second.pid()).is_empty());
 }
+
+#[test]
+fn agp_down_stale_removes_what_a_bench_killed_with_sigkill_left_and_names_it() {
+    let _turn = one_at_a_time();
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut bench = Bench::start(dir.path());
+    bench.wait_for_an_episode();
+    let pid = bench.pid();
+    let children = children_of(pid);
+    bench.signal(libc::SIGKILL, false);
+    bench.wait();
+    let deadline = Instant::now() + TIMEOUT;
+    while children.iter().any(|&c| !process_is_gone(c)) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(
+        !bench_files(pid).is_empty(),
+        "a bench killed with -9 cannot clean: its pipelines' files stay"
+    );
+    let down = run_agp(dir.path(), &["down", "--stale"], TIMEOUT);
+    assert!(down.status.success(), "{}", down.stderr);
+    assert!(
+        down.stdout.contains(&format!("bench-{pid}-")),
+        "`agp down --stale` names what it removed: {}",
+        down.stdout
+    );
+    let left = bench_files(pid);
+    assert!(left.is_empty(), "files of the killed bench left: {left:?}");
+}
