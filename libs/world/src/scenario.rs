@@ -422,6 +422,7 @@ impl Scenario {
     /// not a regular file (a FIFO, a link to `/dev/zero`) and any file larger than
     /// [`MAX_CONFIG_FILE_BYTES`].
     pub fn load(path: &Path) -> Result<Scenario, ScenarioLoadError> {
+        let path = &crate::lexically_normal(path);
         let text = read_regular_text(path, MAX_CONFIG_FILE_BYTES).map_err(|reason| {
             ScenarioLoadError::Read {
                 path: path.display().to_string(),

@@ -272,10 +272,10 @@ fn clean_dead(instance: &Instance) -> Result<DownOutcome> {
     let lock = InstanceLock::acquire(instance)?;
     // Children of a supervisor killed a moment ago are still being killed by the kernel.
     let deadline = Instant::now() + DEAD_CHILDREN_WAIT;
-    let mut alive = crate::up::alive_nodes(instance, false);
+    let mut alive = crate::slot::alive_nodes(instance, false);
     while !alive.is_empty() && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(20));
-        alive = crate::up::alive_nodes(instance, false);
+        alive = crate::slot::alive_nodes(instance, false);
     }
     if !alive.is_empty() {
         bail!(

@@ -42,8 +42,10 @@ use agp_world::TaskSpec;
 
 use crate::goals::GoalBook;
 
+use crate::console::Log;
 use crate::rates::MessageRates;
-use crate::up::{Log, RunEnd, Slot, SlotState, describe, spawn_process};
+use crate::run_end::RunEnd;
+use crate::slot::{Slot, SlotState, describe, spawn_process};
 use agp_runtime::children::signal_group;
 
 /// How long a swapped-in process may take to become ready, and then to drive, unless the

@@ -27,7 +27,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::Node;
 
-use crate::up::Log;
+use crate::console::Log;
 
 /// How long the judge may take to score a goal.
 const JUDGE_TIMEOUT: Duration = Duration::from_secs(10);

@@ -507,6 +507,19 @@ fn line_at(text: &str, offset: usize) -> usize {
 }
 
 impl LaunchConfig {
+    /// Whether the planner runs under another supervisor, reached through this instance's
+    /// bridge (a `remote = { role = "planner", ... }` process, or an `agp bridge --side
+    /// robot` written out): the judge here then has a task only if the far planner sent one.
+    pub fn planner_is_remote(&self) -> bool {
+        self.processes.iter().any(|p| {
+            p.exec.file_name().is_some_and(|n| n == "agp")
+                && p.args.first().is_some_and(|a| a == "bridge")
+                && p.args
+                    .windows(2)
+                    .any(|w| w[0] == "--side" && w[1] == "robot")
+        })
+    }
+
     /// Whether physics and the estimator run under another supervisor, reached through this
     /// instance's bridge (a `remote = { role = "robot", ... }` process, or an `agp bridge
     /// --side planner` written out): that supervisor runs the judge beside physics and owns
@@ -528,7 +541,7 @@ impl LaunchConfig {
         match agp_world::read_regular_text(path, agp_world::MAX_CONFIG_FILE_BYTES) {
             Ok(text) => Self::parse(&text, path, options),
             Err(e) => Err(LaunchConfigParseError {
-                file: path.to_owned(),
+                file: agp_world::lexically_normal(path),
                 faults: vec![LaunchFault {
                     line: None,
                     kind: LaunchFaultKind::Read(e),
@@ -545,7 +558,7 @@ impl LaunchConfig {
         options: &LaunchOptions,
     ) -> Result<Self, LaunchConfigParseError> {
         let refuse = |faults| LaunchConfigParseError {
-            file: file.to_owned(),
+            file: agp_world::lexically_normal(file),
             faults,
         };
         let raw: RawLaunch = toml::from_str(text).map_err(|e| {
@@ -556,7 +569,7 @@ impl LaunchConfig {
         })?;
         let base = std::path::absolute(file)
             .ok()
-            .and_then(|f| f.parent().map(Path::to_path_buf))
+            .and_then(|f| f.parent().map(agp_world::lexically_normal))
             .unwrap_or_default();
         let mut check = Checker {
             text,
@@ -566,7 +579,8 @@ impl LaunchConfig {
         let instance = resolve_instance(&mut check, options, &raw);
 
         let scenario = resolve_scenario(&mut check, &raw.scenario, &base);
-        let results = base.join(raw.results.as_deref().unwrap_or("results"));
+        let results =
+            agp_world::lexically_normal(&base.join(raw.results.as_deref().unwrap_or("results")));
         let clock = resolve_clock(&mut check, raw.clock.as_ref());
 
         let (mut processes, first_lines) =
@@ -606,7 +620,7 @@ impl LaunchConfig {
                     },
                 );
             }
-            record = Some(base.join(raw_record.as_ref()));
+            record = Some(agp_world::lexically_normal(&base.join(raw_record.as_ref())));
             processes.insert(0, p);
         }
 
@@ -723,7 +737,7 @@ fn resolve_scenario(check: &mut Checker<'_>, raw: &Spanned<String>, base: &Path)
     if BUILTIN_SCENARIOS.contains(&name.as_str()) {
         return ScenarioSource::Builtin(name.clone());
     }
-    let path = base.join(name);
+    let path = agp_world::lexically_normal(&base.join(name));
     // Anything that exists is loaded, so that a FIFO or a device is refused as what it is.
     if name.is_empty() || !path.exists() {
         check.fault_at(

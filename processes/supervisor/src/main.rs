@@ -5,6 +5,7 @@ use agp_harness::{
 };
 
 mod bridge;
+mod console;
 mod control;
 mod control_plane;
 mod export;
@@ -13,7 +14,9 @@ mod profile;
 mod rates;
 mod record;
 mod replay;
+mod run_end;
 mod signals;
+mod slot;
 mod up;
 mod view;
 
@@ -45,8 +48,8 @@ enum Cmd {
     /// Exit status: 0 the run ended as asked (its `ends_run` process finished, or `agp
     /// down`) and its task, if any, succeeded; 1 the run ended in error (a process failed
     /// past its restart policy, the verdict could not be judged or written, files of the
-    /// instance remain) or could not start; 2 the launch file or the environment is
-    /// invalid, nothing was started; 3 the task failed (the judge's `NOT placed`, or the
+    /// instance remain) or could not start; 2 nothing was started: the launch file or the
+    /// environment is invalid, or the instance is already up; 3 the task failed (the judge's `NOT placed`, or the
     /// path's end not reached); 128 + N stopped by signal N (130 Ctrl-C, 143 SIGTERM).
     Up(UpArgs),
     /// Show each process of a running instance: state, pid, restarts, uptime.
@@ -147,9 +150,10 @@ struct UpArgs {
     /// Run under this instance name instead of the file's.
     #[arg(long)]
     instance: Option<String>,
-    /// Return once every process is running, leaving the supervisor in the background
-    /// (its output goes to `agp-up-<instance>.log` in the results folder). Stop it with
-    /// `agp down`.
+    /// Return once every process is past start-up (running for 2 s, none restarted),
+    /// leaving the supervisor in the background (its output goes to
+    /// `agp-up-<instance>.log` in the results folder); stop it with `agp down`. A process
+    /// that fails at start-up stops the run, and its error line is printed (exit 1).
     #[arg(long)]
     detach: bool,
 }
@@ -339,7 +343,7 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            up::warn(format_args!("agp: error: {e:#}"));
+            console::warn(format_args!("agp: error: {e:#}"));
             ExitCode::FAILURE
         }
     }
@@ -348,9 +352,9 @@ fn main() -> ExitCode {
 fn up(args: &UpArgs) -> Result<u8> {
     // Every child inherits it: a value that names no strategy is refused here, not guessed.
     if let Err(why) = agp_runtime::WaitStrategy::from_env_checked() {
-        up::warn(format_args!("agp: error: {why}"));
-        up::warn(format_args!("agp: nothing was started"));
-        return Ok(up::exit::INVALID);
+        console::warn(format_args!("agp: error: {why}"));
+        console::warn(format_args!("agp: nothing was started"));
+        return Ok(run_end::exit::INVALID);
     }
     let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
     let options = LaunchOptions {
@@ -363,23 +367,40 @@ fn up(args: &UpArgs) -> Result<u8> {
         Ok(c) => c,
         Err(e) => {
             for line in e.to_string().lines() {
-                up::warn(format_args!("agp: error: {line}"));
+                console::warn(format_args!("agp: error: {line}"));
             }
-            up::warn(format_args!("agp: nothing was started"));
-            return Ok(up::exit::INVALID);
+            console::warn(format_args!("agp: nothing was started"));
+            return Ok(run_end::exit::INVALID);
         }
     };
+    // An instance another supervisor holds is refused before anything starts, exit 2.
+    match InstanceLock::acquire(&control::instance_named(&config.instance)?) {
+        Ok(lock) => drop(lock),
+        Err(e @ agp_runtime::InstanceLockError::Held { .. }) => {
+            console::warn(format_args!("agp: error: {e}"));
+            console::warn(format_args!("agp: nothing was started"));
+            return Ok(run_end::exit::INVALID);
+        }
+        Err(e) => return Err(e.into()),
+    }
     if args.detach && std::env::var_os(DETACHED_ENV).is_none() {
         return detach(args, &config);
     }
     up::up(&config)
 }
 
+/// How long every process of a detached run must have run, none restarted, before
+/// `agp up --detach` calls it started: a planner with no AG file, a bad argument or a
+/// missing service fails well within it (the one seen: restarted three times, gone in 1.7 s).
+const DETACH_SETTLE: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Set in the environment of the background supervisor `--detach` starts.
 const DETACHED_ENV: &str = "AGP_DETACHED";
 
 /// `agp up --detach`: starts `agp up` again in a session of its own with its output in a
-/// log file, and returns once its status says every process runs. An instance another
+/// log file, and returns once its status says every process has run for [`DETACH_SETTLE`]
+/// and none was restarted. A process restarted before then failed at start-up: the run is
+/// stopped, the error lines of its log are printed, and the exit is 1. An instance another
 /// supervisor holds is refused at once, naming that supervisor's pid; and only the status
 /// of the supervisor it started (its pid) counts as started.
 fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
@@ -421,6 +442,7 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
         .spawn()
         .context("cannot start the background supervisor")?;
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let mut started_and_failed: Option<String> = None;
     loop {
         if let Some(status) = child
             .try_wait()
@@ -430,6 +452,20 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
             eprint!("{text}");
             anyhow::bail!(
                 "the background supervisor ended ({status}) before every process ran; its log: {}",
+                log_path.display()
+            );
+        }
+        if let Some(failing) = started_and_failed.as_deref() {
+            // Stop what is left of the run; its log holds each failure's line.
+            let _ = control::down(&config.instance, std::time::Duration::from_secs(20));
+            let _ = child.wait();
+            let text = std::fs::read_to_string(&log_path).unwrap_or_default();
+            for line in text.lines().filter(|l| l.contains("error")) {
+                console::warn(format_args!("{line}"));
+            }
+            anyhow::bail!(
+                "process `{failing}` of instance `{}` failed at start-up and was restarted; the run was stopped; its log: {}",
+                config.instance,
                 log_path.display()
             );
         }
@@ -443,7 +479,16 @@ fn detach(args: &UpArgs, config: &LaunchConfig) -> Result<u8> {
                     report.supervisor_pid
                 );
             }
-            if report.all_running() {
+            if let Some(p) = report.processes.iter().find(|p| p.restarts > 0) {
+                started_and_failed = Some(p.name.clone());
+                continue;
+            }
+            if report.all_running()
+                && report
+                    .processes
+                    .iter()
+                    .all(|p| p.uptime_s >= DETACH_SETTLE.as_secs_f64())
+            {
                 report.print();
                 println!(
                     "agp: instance `{}` runs in the background; log {}; stop it with `agp down --instance {}`",
@@ -567,12 +612,12 @@ impl Swapped {
                 "handover_us": self.handover_us,
                 "exec": self.exec,
             });
-            up::say(format_args!(
+            console::say(format_args!(
                 "{}",
                 serde_json::to_string(&v).context("cannot encode JSON")?
             ));
         } else {
-            up::say(format_args!(
+            console::say(format_args!(
                 "agp: swapped `{}` of instance `{}`: pid {}, epoch {}, handover {:.1} us (ready -> first command applied)",
                 self.process,
                 self.instance,
@@ -661,7 +706,7 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
     if file_stamp(path).is_none() {
         anyhow::bail!("--watch {}: no such file", path.display());
     }
-    up::warn(format_args!(
+    console::warn(format_args!(
         "agp: watching {} for `{}` of instance `{name}`: each new build is swapped in (Ctrl-C to stop)",
         path.display(),
         args.process
@@ -671,14 +716,14 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
     let mut refused = 0u32;
     loop {
         if let Some(s) = signals::first() {
-            up::warn(format_args!(
+            console::warn(format_args!(
                 "agp: watch stopped by {}: {swaps} swaps, {refused} refused",
                 signals::name(s)
             ));
             return Ok(0);
         }
         if !InstanceLock::is_held(&instance) {
-            up::warn(format_args!(
+            console::warn(format_args!(
                 "agp: instance `{name}` is down: watch ends ({swaps} swaps, {refused} refused)"
             ));
             return Ok(0);
@@ -698,12 +743,12 @@ fn watch(args: &SwapArgs, name: &str, path: &std::path::Path) -> Result<u8> {
                 Err(e) => {
                     refused += 1;
                     if args.json {
-                        up::say(format_args!(
+                        console::say(format_args!(
                             "{}",
                             serde_json::json!({"instance": name, "process": args.process, "refused": format!("{e:#}")})
                         ));
                     } else {
-                        up::say(format_args!(
+                        console::say(format_args!(
                             "agp: {e:#}; the running `{}` drives on",
                             args.process
                         ));

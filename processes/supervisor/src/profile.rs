@@ -873,7 +873,7 @@ pub fn run(args: &ProfileArgs) -> Result<u8> {
     }
     let ended_early = sampling.ended_early;
     if ended_early {
-        crate::up::warn(format_args!(
+        crate::console::warn(format_args!(
             "agp: error: instance `{name}` went down {:.1} s into the {:.1} s profile; what was sampled until then follows (the floor runs alone: no pipeline is left to pause)",
             sampling.elapsed.as_secs_f64(),
             args.seconds

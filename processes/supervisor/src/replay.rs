@@ -164,7 +164,7 @@ pub(crate) fn run(args: &ReplayArgs) -> Result<u8> {
     }
     if equal != compared || account["complete"] != serde_json::Value::Bool(true) {
         println!("agp: replay: the replayed run differs from the recorded one");
-        return Ok(up::exit::ERROR);
+        return Ok(crate::run_end::exit::ERROR);
     }
     Ok(0)
 }
