@@ -360,3 +360,72 @@ fn the_wheel_level_python_planner_carries_on_after_a_physics_restart() {
     down(dir.path(), name, up);
     assert_eq!(done[1]["end"], "done", "{:?}", done);
 }
+
+/// The children of process `pid` (`/proc/<pid>/task/<pid>/children`).
+fn children(pid: u32) -> Vec<u32> {
+    std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+        .unwrap_or_default()
+        .split_whitespace()
+        .filter_map(|p| p.parse().ok())
+        .collect()
+}
+
+#[test]
+fn the_skills_executor_never_outlives_the_python_planner_that_started_it() {
+    let name = "t-py-push-orphan";
+    let python = python();
+    let wrappers = tempfile::tempdir().expect("a folder");
+    let python_s = python_wrapper(wrappers.path(), &python);
+    let args = vec![
+        example("push_planner.py").display().to_string(),
+        "--serve".to_owned(),
+    ];
+    let dir = LaunchDir::new(&live_launch(
+        name,
+        &learned_ag("triangle"),
+        &python_s,
+        &args,
+    ));
+    let _guard = DownOnPanic::new(dir.path(), name);
+    let mut up = AgpUp::start(&dir.launch(), &[]);
+    up.wait_for_lines("started", 3, TIMEOUT);
+    up.wait_for_lines("serving the goals", 1, TIMEOUT);
+    let planner =
+        agp_tests::status_entry(&status_json(dir.path(), name, TIMEOUT), "planner")["pid"]
+            .as_u64()
+            .and_then(|p| u32::try_from(p).ok())
+            .expect("the planner runs");
+    // The wrapper execs the interpreter: the planner's pid is Python's, its child the
+    // executor `agp-planner --skills`.
+    let executor = children(planner);
+    assert_eq!(
+        executor.len(),
+        1,
+        "the Python planner's children: {executor:?}"
+    );
+    let executor = executor[0];
+    // SAFETY: kill(2) of the planner the supervisor this test started runs, by its pid.
+    assert_eq!(
+        unsafe { libc::kill(i32::try_from(planner).expect("a pid"), libc::SIGKILL) },
+        0
+    );
+    // The executor ends on its parent's death (SIGTERM by PR_SET_PDEATHSIG), whether or
+    // not the supervisor is still up.
+    let deadline = std::time::Instant::now() + TIMEOUT;
+    while !agp_tests::process_is_gone(executor) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the executor (pid {executor}) outlived the Python planner"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // The supervisor may already be ending the run its planner left: down if it is not.
+    let _ = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
+    let end = up.wait(TIMEOUT);
+    assert!(
+        agp_tests::process_is_gone(executor),
+        "the executor outlived the run: {}",
+        end.stdout
+    );
+    assert_eq!(count_instance_files(name), 0, "files of `{name}` remain");
+}
