@@ -348,12 +348,13 @@ impl agp_recording::Tap for FoxgloveTap {
                 if let Some(g) = refused(payload_from_bytes::<Goal>(data), r) {
                     self.state.on_goal(&g);
                     self.dirty = true;
-                    self.log(
-                        out,
-                        "supervisor",
-                        format!("goal {}: {}", g.id, task_text(&g.task)),
-                        t,
-                    )?;
+                    // Goal 0 is none: the supervisor's word that no goal is under way.
+                    let text = if g.id == 0 {
+                        "no goal".to_owned()
+                    } else {
+                        format!("goal {}: {}", g.id, task_text(&g.task))
+                    };
+                    self.log(out, "supervisor", text, t)?;
                 }
             }
             ServiceNames::GOAL_ENDS => {
