@@ -333,6 +333,10 @@ pub fn run_condition(setup: &AdaptSetup<'_>, online: OnlineLearningConfig) -> Re
     let order = scenario.object.shape.symmetry_order();
     let mut run = ConditionRun::default();
     for (k, goal) in goals.iter().enumerate() {
+        // A stop (`agp bench` got SIGINT, SIGTERM or SIGHUP) keeps the episodes run.
+        if crate::stop::requested() {
+            break;
+        }
         if k == setup.warmup {
             world.inner.sim_mut().apply_world_change(setup.change);
             world.after_change = true;
@@ -794,6 +798,8 @@ pub fn run(args: &BenchAdaptArgs) -> Result<Value> {
     let work: Vec<(usize, usize)> = (0..setups.len())
         .flat_map(|k| (0..CONDITIONS.len()).map(move |c| (k, c)))
         .collect();
+    // From here on the episode loops poll the stop flag.
+    let _checked = crate::stop::checked();
     let runs = side_by_side(&work, |&(k, c)| {
         let started = Instant::now();
         let (name, online) = CONDITIONS[c];
@@ -820,6 +826,23 @@ pub fn run(args: &BenchAdaptArgs) -> Result<Value> {
             one_seed_doc(&info, seed, ag_file, [&pair[0].0, &pair[1].0], wall_s)
         })
         .collect();
+    if crate::stop::requested() {
+        // The episodes run so far, seeds of fewer episodes included.
+        let mut doc = assemble(
+            &run_parts(&docs, "adapt", |_| Value::Null, all_seeds)?,
+            args.seeds.shard,
+        );
+        doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
+        let finished = runs.iter().map(|(r, _)| r.episodes.len()).sum();
+        let planned = work.len() * (args.warmup + args.episodes);
+        return Err(crate::stop::write_partial(
+            doc,
+            args.json.as_deref(),
+            "adapt",
+            finished,
+            planned,
+        ));
+    }
     let mut doc = assemble_run(&docs, all_seeds, args.seeds.shard)?;
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);

@@ -8,8 +8,9 @@
 //! 128 + N. A second signal forces the exit at once: a watcher thread kills the bench's
 //! children, removes the files of every instance of this bench (`bench-<pid>-*`) and
 //! exits 128 + N. The learning (in-process) polls the flag at every simulated step and
-//! writes the (seed, object) pairs it learned. Phases that poll no flag (`agp bench
-//! adapt`) hold no pipeline and no file: the first signal ends them at once.
+//! writes the (seed, object) pairs it learned; `agp bench adapt` (in-process) between its
+//! episodes. A phase that polls no flag holds no pipeline and no file: the first signal
+//! ends it at once (after 200 ms), with no partial JSON.
 //!
 //! [`sweep_stale`] removes the instances of benches that died without cleaning (`kill
 //! -9`): `bench-<pid>-*` whose pid no `agp` runs any more, owned by this user. Every `agp
