@@ -218,7 +218,7 @@ struct DownArgs {
     #[arg(long, default_value_t = 60)]
     timeout_s: u64,
     /// Instead, remove the leftovers of benchmarks that died without cleaning (`kill -9`):
-    /// every instance `bench-<pid>-*` of this user whose pid no `agp` runs any more (what
+    /// every instance `bench-<pid>-*` of this user whose pid no process runs any more (what
     /// every `agp bench` does when it starts).
     #[arg(long, conflicts_with = "instance")]
     stale: bool,

@@ -13,7 +13,7 @@
 //! ends it at once (after 200 ms), with no partial JSON.
 //!
 //! [`sweep_stale`] removes the instances of benches that died without cleaning (`kill
-//! -9`): `bench-<pid>-*` whose pid no `agp` runs any more, owned by this user. Every `agp
+//! -9`): `bench-<pid>-*` whose pid no process runs any more, owned by this user. Every `agp
 //! bench` sweeps first; `agp down --stale` does it by hand.
 
 use std::collections::BTreeSet;
@@ -314,11 +314,11 @@ fn remove_instances_of(pid: u32) -> (usize, usize) {
     (instances, files)
 }
 
-/// Whether an `agp` process runs as `pid` (a pid recycled by another program counts as
-/// dead: its bench is gone).
+/// Whether a process runs as `pid`. Any process counts, not only one named `agp` (a bench
+/// started through a link of another name must keep its files): a pid recycled by another
+/// program keeps a dead bench's leftovers until it ends, which is the safe side.
 fn agp_runs(pid: u32) -> bool {
     !is_gone(pid)
-        && std::fs::read_to_string(format!("/proc/{pid}/comm")).is_ok_and(|c| c.trim() == "agp")
 }
 
 /// What [`sweep_stale`] removed.
@@ -330,7 +330,7 @@ pub struct Swept {
     pub files: usize,
 }
 
-/// Removes every instance `bench-<pid>-*` of this user whose pid no `agp` runs any more
+/// Removes every instance `bench-<pid>-*` of this user whose pid no process runs any more
 /// (a bench killed with -9 could not clean); never this process's own.
 pub fn sweep_stale() -> Result<Swept> {
     let me = std::process::id();
