@@ -1,8 +1,8 @@
 //! The rules of the crate layout (ARCHITECTURE.md, "Crates and what each may depend on"),
 //! read from the manifests themselves: the logic lives in libraries, the process crates are
 //! thin binaries that depend on no other process crate, libraries depend on no process or
-//! tool crate, and ground truth's readers (the harness) are never a dependency of a
-//! process but the supervisor's.
+//! tool crate, ground truth's readers (the harness) are never a dependency of a
+//! process but the supervisor's, and the launch file's library links no iceoryx2.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -240,4 +240,34 @@ fn the_planner_process_decides_and_links_no_perception_and_no_ground_truth_reade
         "the planner process's code names perception:\n{}",
         found.join("\n")
     );
+}
+
+#[test]
+fn the_launch_library_links_no_iceoryx2_no_runtime_and_no_process_starter() {
+    // ARCHITECTURE.md: a launch file is read and validated by a pure library; what opens
+    // shared memory (iceoryx2, agp-runtime), carries the link (agp-bridge) or runs a
+    // process (the supervisor) stays out of it. shared-types's `ZeroCopySend` derive
+    // (iceoryx2-bb-*) is no runtime and is allowed.
+    let members = members();
+    let mut links = linked("agp-launch");
+    for forbidden in ["agp-runtime", "agp-bridge", "agp-view", "agp-supervisor"] {
+        assert!(
+            !links.contains(forbidden),
+            "`agp-launch` links `{forbidden}` (all it links: {links:?})"
+        );
+    }
+    links.insert("agp-launch".to_owned());
+    for name in &links {
+        let (dir, _) = members
+            .get(name)
+            .unwrap_or_else(|| panic!("no crate `{name}`"));
+        let text = std::fs::read_to_string(workspace_root().join(dir).join("Cargo.toml"))
+            .unwrap_or_else(|e| panic!("{dir}/Cargo.toml: {e}"));
+        let man: toml::Table = text.parse().expect("a member manifest is TOML");
+        let deps = man.get("dependencies").and_then(|t| t.as_table());
+        assert!(
+            deps.is_none_or(|t| !t.contains_key("iceoryx2")),
+            "`agp-launch` links iceoryx2 through `{name}` ({dir}/Cargo.toml)"
+        );
+    }
 }

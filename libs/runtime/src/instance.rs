@@ -20,38 +20,7 @@ use iceoryx2::service::port_factory::request_response;
 
 use crate::AgpIpc;
 
-/// Longest instance name: root path plus prefix must stay under about 60 characters, since
-/// iceoryx2 derives Unix socket paths from them.
-pub const MAX_INSTANCE_NAME_LEN: usize = 20;
-
-/// Environment variable that moves the folder holding every instance's iceoryx2 root.
-pub const ROOT_ENV: &str = "AGP_IOX2_ROOT";
-
-/// Why an instance name was refused.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum InstanceNameError {
-    Empty,
-    TooLong { len: usize },
-    BadCharacter { c: char },
-}
-
-impl std::fmt::Display for InstanceNameError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Empty => write!(f, "instance name is empty"),
-            Self::TooLong { len } => write!(
-                f,
-                "instance name is {len} characters long; at most {MAX_INSTANCE_NAME_LEN} fit in iceoryx2's socket paths"
-            ),
-            Self::BadCharacter { c } => write!(
-                f,
-                "instance name holds `{c}`; use lowercase letters, digits, `-` and `_`"
-            ),
-        }
-    }
-}
-
-impl std::error::Error for InstanceNameError {}
+pub use agp_shared_types::{InstanceNameError, MAX_INSTANCE_NAME_LEN, ROOT_ENV};
 
 /// Why an instance's folder (the base folder of every instance's root, or the instance's
 /// own root folder) could not be used.
@@ -169,21 +138,9 @@ impl Instance {
         })
     }
 
-    /// Checks a name without building anything.
+    /// Checks a name without building anything ([`agp_shared_types::validate_instance_name`]).
     pub fn validate_name(name: &str) -> Result<(), InstanceNameError> {
-        if name.is_empty() {
-            return Err(InstanceNameError::Empty);
-        }
-        if name.len() > MAX_INSTANCE_NAME_LEN {
-            return Err(InstanceNameError::TooLong { len: name.len() });
-        }
-        if let Some(c) = name
-            .chars()
-            .find(|c| !(c.is_ascii_lowercase() || c.is_ascii_digit() || *c == '-' || *c == '_'))
-        {
-            return Err(InstanceNameError::BadCharacter { c });
-        }
-        Ok(())
+        agp_shared_types::validate_instance_name(name)
     }
 
     /// The `.` ends the name: instance names cannot hold one (iceoryx2's file names can),

@@ -34,7 +34,7 @@ pub use state::{AgLayer, GoalView, ViewState};
 pub use tap::{FOXGLOVE_METADATA, FoxgloveTap, SCENE_RATE_HZ, channels};
 
 /// Foxglove's default WebSocket port.
-pub const DEFAULT_PORT: u16 = 8765;
+pub const DEFAULT_PORT: u16 = agp_shared_types::DEFAULT_VIEW_PORT;
 
 /// Slowest and fastest scene rate, publications per second.
 pub const RATE_HZ_RANGE: (f64, f64) = (0.5, 200.0);

@@ -4,9 +4,9 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use agp_launch::{LaunchConfig, LaunchOptions};
 use agp_runtime::{Instance, InstanceLock, control_client};
 use agp_shared_types::{ControlKind, ControlResponse, ProcessState, read_str};
-use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
 use serde::Serialize;
 
@@ -61,6 +61,7 @@ impl InstanceArg {
         let options = LaunchOptions {
             instance: None,
             exe_dir: exe.parent().map(Path::to_path_buf).unwrap_or_default(),
+            remote_checks: Some(agp_supervisor::BRIDGE_CHECKS),
         };
         let config = LaunchConfig::load(launch, &options).map_err(|e| anyhow!("{e}"))?;
         Ok(config.instance)

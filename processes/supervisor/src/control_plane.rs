@@ -37,7 +37,8 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{CallbackProgression, Node};
 
 use agp_harness::evaluation::RunJudge;
-use agp_supervisor::{LaunchConfig, check_goal};
+use agp_launch::LaunchConfig;
+use agp_supervisor::check_goal;
 use agp_world::TaskSpec;
 
 use crate::goals::GoalBook;

@@ -1,13 +1,7 @@
-//! The supervisor's pure logic: the launch file and the restart policy, testable without shared memory.
+//! The supervisor's logic beside its CLI: a live session's goals, and the checks of a launch file's plan (`agp_launch`) that need the bridge or run a process.
 
 mod goal_spec;
-mod launch;
+mod launch_checks;
 
 pub use goal_spec::{GoalSpec, GoalSpecError, check_goal};
-
-pub use launch::{
-    BUILTIN_SCENARIOS, CONTEXT_ENV, ClockConfig, ClockMode, DEFAULT_RATE_HZ, DEFAULT_STOP_GRACE,
-    ExitDecision, LaunchConfig, LaunchConfigParseError, LaunchFault, LaunchFaultKind,
-    LaunchOptions, MAX_RESTART_DELAY, ProcessConfig, RECORDER_PROCESS, RestartConfig,
-    RestartPolicy, ScenarioSource,
-};
+pub use launch_checks::{BRIDGE_CHECKS, CheckProcesses};

@@ -23,8 +23,9 @@ mod view;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use agp_launch::{LaunchConfig, LaunchOptions};
 use agp_runtime::{InstanceLock, control_client};
-use agp_supervisor::{GoalSpec, LaunchConfig, LaunchOptions};
+use agp_supervisor::{BRIDGE_CHECKS, CheckProcesses, GoalSpec};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
@@ -360,6 +361,7 @@ fn up(args: &UpArgs) -> Result<u8> {
     let options = LaunchOptions {
         instance: args.instance.clone(),
         exe_dir: exe.parent().map(PathBuf::from).unwrap_or_default(),
+        remote_checks: Some(BRIDGE_CHECKS),
     };
     let config = match LaunchConfig::load(&args.launch, &options)
         .and_then(|c| c.check_processes().map(|()| c))

@@ -14,10 +14,10 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use agp_harness::evaluation::TruthRecorder;
+use agp_launch::{LaunchConfig, LaunchOptions};
 use agp_recording::{Recording, ReplayAction, ReplayScript, RunInfo, same_sensing};
 use agp_runtime::{DriveError, LockstepDriver, TruthAccess};
 use agp_shared_types::{GroundTruth, Pose2};
-use agp_supervisor::{LaunchConfig, LaunchOptions};
 use anyhow::{Context, Result, anyhow, bail};
 
 use crate::up;
@@ -113,6 +113,7 @@ pub(crate) fn run(args: &ReplayArgs) -> Result<u8> {
     let options = LaunchOptions {
         instance: None,
         exe_dir: exe.parent().map(Path::to_path_buf).unwrap_or_default(),
+        remote_checks: Some(agp_supervisor::BRIDGE_CHECKS),
     };
     let config = LaunchConfig::load(&launch_path, &options).map_err(|e| anyhow!("{e}"))?;
     println!(

@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::Instant;
 
+use agp_launch::{ExitDecision, LaunchConfig, ProcessConfig};
 use agp_runtime::children::spawn_guarded;
 use agp_runtime::control_client::is_client_node;
 use agp_runtime::{AgpIpc, Instance};
-use agp_supervisor::{ExitDecision, LaunchConfig, ProcessConfig};
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node};
 

@@ -4,11 +4,11 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use agp_launch::{LaunchConfig, RECORDER_PROCESS};
 use agp_runtime::{AgpIpc, Instance, InstanceLock, Topic, WaitStrategy};
 use agp_shared_types::{
     GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
 };
-use agp_supervisor::{LaunchConfig, RECORDER_PROCESS};
 use anyhow::{Context, Result, anyhow};
 use iceoryx2::prelude::Node;
 

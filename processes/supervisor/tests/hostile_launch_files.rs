@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use agp_supervisor::{LaunchConfig, LaunchConfigParseError, LaunchFaultKind, LaunchOptions};
+use agp_launch::{LaunchConfig, LaunchConfigParseError, LaunchFaultKind, LaunchOptions};
 use proptest::prelude::*;
 
 const GOOD: &str = r#"instance = "t-hostile"
@@ -52,6 +52,7 @@ impl Fixture {
         LaunchOptions {
             instance: None,
             exe_dir: self.dir.path().join("bin"),
+            remote_checks: Some(agp_supervisor::BRIDGE_CHECKS),
         }
     }
 

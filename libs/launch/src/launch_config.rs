@@ -62,7 +62,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use agp_runtime::{Instance, InstanceNameError, ROOT_ENV, WaitStrategy};
+use agp_shared_types::{InstanceNameError, ROOT_ENV, WaitStrategy, validate_instance_name};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -102,7 +102,7 @@ pub const CONTEXT_ENV: [&str; 6] = [
 pub struct LaunchConfig {
     /// The launch file, as it was named.
     pub file: PathBuf,
-    /// The instance name (from the file or the override), valid for [`Instance::new`].
+    /// The instance name (from the file or the override), valid for `agp_runtime::Instance::new`.
     pub instance: String,
     pub scenario: ScenarioSource,
     /// Absolute folder where results go (not created by parsing).
@@ -291,6 +291,24 @@ pub struct LaunchOptions {
     /// Folder where bare executable names (`exec = "agp-physics"`) are looked up: the
     /// folder of the running `agp`.
     pub exe_dir: PathBuf,
+    /// The bridge's own checks of a `remote` entry's endpoint, topics and keys; `None`
+    /// checks a `remote` entry's shape only.
+    pub remote_checks: Option<RemoteChecks>,
+}
+
+/// The checks of a `remote` entry that belong to the bridge (`agp-bridge`, which carries
+/// zenoh and iceoryx2): the caller hands them in, so parsing a launch file stays pure.
+/// Each returns the reason a value is refused, as the bridge words it.
+#[derive(Debug, Clone, Copy)]
+pub struct RemoteChecks {
+    /// An endpoint, `tls/HOST:PORT` or `tcp/HOST:PORT`.
+    pub endpoint: fn(&str) -> Result<(), String>,
+    /// A list of topics: `all` or names joined by `,`.
+    pub topics: fn(&str) -> Result<(), String>,
+    /// The keys of side `side` (`robot` or `planner`) in the key folder `dir`.
+    pub keys: fn(dir: &Path, side: &str) -> Result<(), String>,
+    /// What an endpoint lacks, given whether the link's keys were given.
+    pub security_fault: fn(endpoint: &str, tls: bool) -> Option<String>,
 }
 
 /// Why a launch file was refused: every fault found, so the user fixes them in one go.
@@ -478,6 +496,7 @@ struct RawRestart {
 /// Collects faults while the whole file is checked.
 struct Checker<'a> {
     text: &'a str,
+    remote: Option<&'a RemoteChecks>,
     faults: Vec<LaunchFault>,
 }
 
@@ -573,6 +592,7 @@ impl LaunchConfig {
             .unwrap_or_default();
         let mut check = Checker {
             text,
+            remote: options.remote_checks.as_ref(),
             faults: Vec::new(),
         };
 
@@ -637,60 +657,6 @@ impl LaunchConfig {
             processes,
             record,
         })
-    }
-
-    /// Asks every agp planner of the file whether its arguments run on the file's clock
-    /// (`agp-planner --check` with the context the run would give it): a task in realtime
-    /// runs, the learning phase does not. Run before anything starts; every refusal names
-    /// the process's line.
-    pub fn check_processes(&self) -> Result<(), LaunchConfigParseError> {
-        let mut faults = Vec::new();
-        for p in &self.processes {
-            if p.exec.file_stem().and_then(|s| s.to_str()) != Some("agp-planner") {
-                continue;
-            }
-            let out = std::process::Command::new(&p.exec)
-                .arg("--check")
-                .args(&p.args)
-                .envs(&p.env)
-                .envs(self.context_env(p))
-                .stdin(std::process::Stdio::null())
-                .stdout(std::process::Stdio::null())
-                .stderr(std::process::Stdio::piped())
-                .output();
-            let reason = match out {
-                Ok(o) if o.status.success() => continue,
-                Ok(o) => {
-                    let text = String::from_utf8_lossy(&o.stderr);
-                    // The first line says it (clap's usage follows it).
-                    text.lines()
-                        .map(str::trim)
-                        .find(|l| !l.is_empty())
-                        .map(|l| {
-                            l.trim_start_matches("agp-planner: ")
-                                .trim_start_matches("error: ")
-                                .to_owned()
-                        })
-                        .unwrap_or_else(|| format!("`--check` ended with {}", o.status))
-                }
-                Err(e) => format!("cannot run `{} --check`: {e}", p.exec.display()),
-            };
-            faults.push(LaunchFault {
-                line: Some(p.line),
-                kind: LaunchFaultKind::ProcessRefused {
-                    process: p.name.clone(),
-                    reason,
-                },
-            });
-        }
-        if faults.is_empty() {
-            Ok(())
-        } else {
-            Err(LaunchConfigParseError {
-                file: self.file.clone(),
-                faults,
-            })
-        }
     }
 
     /// How the processes wait for messages: each one's `AGP_WAIT` from its `env`, else
@@ -796,7 +762,7 @@ fn view_process(
 ) -> Option<ProcessConfig> {
     let port = match raw.as_ref() {
         RawView::On(false) => return None,
-        RawView::On(true) => agp_view::DEFAULT_PORT,
+        RawView::On(true) => agp_shared_types::DEFAULT_VIEW_PORT,
         RawView::Port(p) => match u16::try_from(*p) {
             Ok(p) => p,
             Err(_) => {
@@ -838,7 +804,7 @@ fn view_process(
 fn resolve_instance(check: &mut Checker<'_>, options: &LaunchOptions, raw: &RawLaunch) -> String {
     match (&options.instance, &raw.instance) {
         (Some(name), _) => {
-            if let Err(reason) = Instance::validate_name(name) {
+            if let Err(reason) = validate_instance_name(name) {
                 check.fault(LaunchFaultKind::BadInstanceName {
                     name: name.clone(),
                     from_cli: true,
@@ -848,7 +814,7 @@ fn resolve_instance(check: &mut Checker<'_>, options: &LaunchOptions, raw: &RawL
             name.clone()
         }
         (None, Some(name)) => {
-            if let Err(reason) = Instance::validate_name(name.as_ref()) {
+            if let Err(reason) = validate_instance_name(name.as_ref()) {
                 check.fault_at(
                     name,
                     LaunchFaultKind::BadInstanceName {
@@ -1145,15 +1111,17 @@ fn remote_bridge_args(
     base: &Path,
 ) -> Vec<String> {
     let r = raw.as_ref();
+    let checks = check.remote;
     let mut faults = Vec::new();
+    // The side of the bridge that runs here: the far end's role's opposite.
     let side = match r.role.as_str() {
-        "planner" => agp_bridge::Side::Robot,
-        "robot" => agp_bridge::Side::Planner,
+        "planner" => "robot",
+        "robot" => "planner",
         other => {
             faults.push(format!(
                 "unknown remote role `{other}`; expected `planner` (the far end runs the planner) or `robot` (it runs physics and the estimator)"
             ));
-            agp_bridge::Side::Robot
+            "robot"
         }
     };
     let (flag, endpoint) = match (&r.listen, &r.connect) {
@@ -1166,16 +1134,19 @@ fn remote_bridge_args(
         }
     };
     if !endpoint.is_empty()
-        && let Err(e) = agp_bridge::Endpoint::check(&endpoint)
+        && let Some(checks) = checks
+        && let Err(e) = (checks.endpoint)(&endpoint)
     {
-        faults.push(e.to_string());
+        faults.push(e);
     }
-    let security = remote_security(r, side, &endpoint, base, &mut faults);
+    let security = remote_security(r, side, &endpoint, base, checks, &mut faults);
     let topics = r
         .topics
         .as_ref()
         .map_or_else(|| "all".to_owned(), |t| t.join(","));
-    if let Err(e) = agp_bridge::parse_topics(&topics) {
+    if let Some(checks) = checks
+        && let Err(e) = (checks.topics)(&topics)
+    {
         faults.push(format!("`remote.topics`: {e}"));
     }
     let link = r.link.clone().unwrap_or_else(|| "agp".to_owned());
@@ -1201,7 +1172,7 @@ fn remote_bridge_args(
     let mut args = vec![
         "bridge".to_owned(),
         "--side".to_owned(),
-        side.name().to_owned(),
+        side.to_owned(),
         flag.to_owned(),
         endpoint,
         "--topics".to_owned(),
@@ -1218,15 +1189,18 @@ fn remote_bridge_args(
 /// before anything starts) or `--insecure`. A `remote` that names neither is refused.
 fn remote_security(
     r: &RawRemote,
-    side: agp_bridge::Side,
+    side: &str,
     endpoint: &str,
     base: &Path,
+    checks: Option<&RemoteChecks>,
     faults: &mut Vec<String>,
 ) -> Vec<String> {
     let args = match (&r.tls, r.insecure.unwrap_or(false)) {
         (Some(dir), false) => {
             let dir = base.join(dir);
-            if let Err(e) = agp_bridge::TlsKeys::load(&dir, side) {
+            if let Some(checks) = checks
+                && let Err(e) = (checks.keys)(&dir, side)
+            {
                 faults.push(format!("`remote.tls`: {e}"));
             }
             vec!["--tls".to_owned(), dir.display().to_string()]
@@ -1245,7 +1219,8 @@ fn remote_security(
         }
     };
     if !endpoint.is_empty()
-        && let Some(fault) = agp_bridge::Endpoint::security_fault(endpoint, r.tls.is_some())
+        && let Some(checks) = checks
+        && let Some(fault) = (checks.security_fault)(endpoint, r.tls.is_some())
     {
         faults.push(fault);
     }
@@ -1378,6 +1353,7 @@ mod tests {
             LaunchOptions {
                 instance: None,
                 exe_dir: self.dir.path().join("bin"),
+                remote_checks: None,
             }
         }
 
@@ -1894,192 +1870,5 @@ stop_grace_ms = 500
             shown.ends_with("`view` must be true, false or a port from 0 to 65535, got 70000"),
             "{shown}"
         );
-    }
-
-    /// A file whose planner is remote: physics here, the planner reached through the bridge.
-    const REMOTE: &str = "instance = \"lab\"\nscenario = \"triangle\"\n\
-        [[process]]\nname = \"physics\"\nexec = \"agp-fake\"\n\
-        [[process]]\nname = \"planner\"\n\
-        remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\", insecure = true }\nends_run = true\n";
-
-    fn with_agp(f: &Fixture) {
-        let path = f.dir.path().join("bin/agp");
-        std::fs::write(&path, "#!/bin/sh\n").expect("write");
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
-    }
-
-    #[test]
-    fn a_remote_planner_runs_agp_bridge_on_the_robot_side_in_its_place() {
-        let f = Fixture::new();
-        with_agp(&f);
-        let config = f.parse(REMOTE).expect("a valid file");
-        let planner = &config.processes[1];
-        assert_eq!(planner.name, "planner");
-        assert_eq!(planner.exec, f.dir.path().join("bin/agp"));
-        assert!(planner.ends_run);
-        let expected = [
-            "bridge",
-            "--side",
-            "robot",
-            "--listen",
-            "tcp/127.0.0.1:7447",
-            "--topics",
-            "all",
-            "--link",
-            "agp",
-            "--insecure",
-        ];
-        assert_eq!(planner.args, expected);
-        // Physics runs here: this supervisor owns the goals.
-        assert!(!config.robot_is_remote());
-        let text = REMOTE.replace(
-            "role = \"planner\", listen = \"tcp/127.0.0.1:7447\"",
-            "role = \"robot\", connect = \"tcp/127.0.0.1:7447\", topics = [\"ir_frames\", \"motor_commands\"], link = \"lab2\"",
-        );
-        let config = f.parse(&text).expect("a valid file");
-        let expected = [
-            "bridge",
-            "--side",
-            "planner",
-            "--connect",
-            "tcp/127.0.0.1:7447",
-            "--topics",
-            "ir_frames,motor_commands",
-            "--link",
-            "lab2",
-            "--insecure",
-        ];
-        assert_eq!(config.processes[1].args, expected);
-        // Physics runs under the far supervisor, which owns the goals.
-        assert!(config.robot_is_remote());
-    }
-
-    #[test]
-    fn a_remote_process_with_a_bad_role_endpoint_topic_or_an_exec_is_refused_on_its_line() {
-        let f = Fixture::new();
-        with_agp(&f);
-        let cases = [
-            (
-                "role = \"planner\"",
-                "role = \"camera\"",
-                "unknown remote role `camera`",
-            ),
-            (
-                "listen = \"tcp/127.0.0.1:7447\"",
-                "listen = \"udp/127.0.0.1:7447\"",
-                "is not a TLS or TCP endpoint",
-            ),
-            (
-                "listen = \"tcp/127.0.0.1:7447\"",
-                "listen = \"tcp/127.0.0.1:0\"",
-                "has no port",
-            ),
-            (
-                "listen = \"tcp/127.0.0.1:7447\"",
-                "listen = \"tcp/127.0.0.1:7447\", connect = \"tcp/127.0.0.1:7448\"",
-                "needs one of `listen` and `connect`",
-            ),
-            (
-                " }\nends_run",
-                ", topics = [\"ground_truth\"] }\nends_run",
-                "unknown topic `ground_truth`",
-            ),
-            (
-                " }\nends_run",
-                ", link = \"a/b\" }\nends_run",
-                "bad `remote.link` `a/b`",
-            ),
-        ];
-        for (from, to, says) in cases {
-            let (line, shown, kind) = f.fault(&REMOTE.replace(from, to));
-            assert_eq!(line, Some(8), "{shown}");
-            assert!(matches!(kind, LaunchFaultKind::BadRemote { .. }), "{shown}");
-            assert!(shown.contains(says), "{shown}");
-        }
-        let (line, shown, _) =
-            f.fault(&REMOTE.replace("remote =", "exec = \"agp-fake\"\nremote ="));
-        assert_eq!(line, Some(8), "{shown}");
-        assert!(shown.contains("no `exec`"), "{shown}");
-        let (line, shown, _) = f.fault(&REMOTE.replace("remote = ", "args = [\"x\"]\nremote = "));
-        assert_eq!(line, Some(8), "{shown}");
-        assert!(shown.contains("no `args`"), "{shown}");
-        let text = REMOTE.replace(
-            "remote = { role = \"planner\", listen = \"tcp/127.0.0.1:7447\", insecure = true }\n",
-            "",
-        );
-        let (line, shown, _) = f.fault(&text);
-        assert_eq!(line, Some(7), "{shown}");
-        assert!(
-            shown.contains("no `exec`: name an executable, or `remote"),
-            "{shown}"
-        );
-    }
-
-    #[test]
-    fn a_remote_over_tls_takes_its_key_folder_from_beside_the_launch_file() {
-        let f = Fixture::new();
-        with_agp(&f);
-        agp_bridge::keygen(&f.dir.path().join("keys"), &[]).expect("keygen");
-        let text = REMOTE.replace(
-            "listen = \"tcp/127.0.0.1:7447\", insecure = true",
-            "listen = \"tls/127.0.0.1:7447\", tls = \"keys\"",
-        );
-        let config = f.parse(&text).expect("a valid file");
-        let args = &config.processes[1].args;
-        let at = args.iter().position(|a| a == "--tls").expect("--tls");
-        assert_eq!(
-            args[at + 1],
-            f.dir.path().join("keys").display().to_string(),
-            "{args:?}"
-        );
-        assert!(args.contains(&"tls/127.0.0.1:7447".to_owned()), "{args:?}");
-        assert!(!args.contains(&"--insecure".to_owned()), "{args:?}");
-    }
-
-    #[test]
-    fn a_remote_without_tls_or_insecure_or_with_an_open_key_is_refused_on_its_line() {
-        let f = Fixture::new();
-        with_agp(&f);
-        let keys = f.dir.path().join("keys");
-        agp_bridge::keygen(&keys, &[]).expect("keygen");
-        let (line, shown, _) =
-            f.fault(&REMOTE.replace("\", insecure = true", "\", tls = \"keys\""));
-        assert_eq!(line, Some(8), "{shown}");
-        assert!(
-            shown.contains("is plain TCP, but the link's keys were given"),
-            "{shown}"
-        );
-        let open_key = keys.join(agp_bridge::tls::key_file(agp_bridge::Side::Robot));
-        std::fs::set_permissions(&open_key, std::fs::Permissions::from_mode(0o644)).expect("chmod");
-        let open_key = open_key.display().to_string();
-        let cases = [
-            (", insecure = true", "", "`remote` needs `tls = \"DIR\"`"),
-            (
-                "tcp/127.0.0.1:7447\", insecure = true",
-                "tls/127.0.0.1:7447\", tls = \"keys\"",
-                open_key.as_str(),
-            ),
-            (
-                "tcp/127.0.0.1:7447\", insecure = true",
-                "tls/127.0.0.1:7447\", tls = \"elsewhere\"",
-                "no such file: make the key folder with `agp bridge keygen DIR`",
-            ),
-            (
-                "tcp/127.0.0.1:7447\", insecure = true",
-                "tls/127.0.0.1:7447\", insecure = true",
-                "is a TLS endpoint: give the link's keys",
-            ),
-            (
-                ", insecure = true",
-                ", insecure = true, tls = \"keys\"",
-                "names both `tls` and `insecure = true`",
-            ),
-        ];
-        for (from, to, says) in cases {
-            let (line, shown, kind) = f.fault(&REMOTE.replace(from, to));
-            assert_eq!(line, Some(8), "{shown}");
-            assert!(matches!(kind, LaunchFaultKind::BadRemote { .. }), "{shown}");
-            assert!(shown.contains(says), "{shown}");
-        }
     }
 }
