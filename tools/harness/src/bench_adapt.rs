@@ -47,8 +47,8 @@ use glam::DVec2;
 use serde_json::{Map, Value, json};
 
 use crate::bench_learn::{self, BenchLearnArgs};
-use crate::bench_tasks::write_json;
 use crate::in_process::InProcessWorld;
+use crate::seeds::write_json;
 use crate::seeds::{
     SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, mean_of, merge_parts,
     number_at, run_parts, seed_list, spread_at,

@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
 
-use crate::bench_tasks::{physics_note, print_place, write_json};
+use crate::bench_tasks::{physics_note, print_place};
+use crate::seeds::write_json;
 use crate::seeds::{MergePartError, number_at, seed_list};
 use crate::{bench_adapt, bench_learn, bench_paper, bench_tasks, bench_trajectory};
 

@@ -193,10 +193,10 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
     if all_seeds.len() > 1 {
         // Each benchmark's merged document beside the seeds' folders, as its own command
         // writes it.
-        bench_tasks::write_json(&args.out.join("learn.json"), &doc["learn"])?;
-        bench_tasks::write_json(&args.out.join("trajectory.json"), &doc["trajectory"])?;
+        crate::seeds::write_json(&args.out.join("learn.json"), &doc["learn"])?;
+        crate::seeds::write_json(&args.out.join("trajectory.json"), &doc["trajectory"])?;
         for object in PLACE_OBJECTS {
-            bench_tasks::write_json(
+            crate::seeds::write_json(
                 &args.out.join(format!("place-{object}.json")),
                 &doc["place"][object],
             )?;
@@ -204,7 +204,7 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
     }
     print_comparison(&doc, args.episodes);
     if let Some(path) = &args.json {
-        bench_tasks::write_json(path, &doc)?;
+        crate::seeds::write_json(path, &doc)?;
         println!("JSON     {}", path.display());
     }
     let missed = missed_targets(&doc);

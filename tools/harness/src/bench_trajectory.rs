@@ -12,15 +12,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::bench_tasks::{
-    EpisodePlan, Overlay, Panel, judged, physics_label, physics_note, plot_runs, prefix_of,
-    progress, resolve_ag, run_episodes, write_json,
+    EpisodePlan, judged, physics_label, physics_note, prefix_of, progress, resolve_ag, run_episodes,
 };
 use crate::seeds::{
     SeedArgs, SeedParts, Shard, Spread, finish_seed_doc, finite_or_null, mean_of, merge_parts,
-    number_at, run_parts, seed_list, spread_at,
+    number_at, run_parts, seed_list, spread_at, write_json,
 };
 use crate::stop;
 use crate::task_goals::{NamedPath, heading_share, path_length};
+use crate::task_plot::{Overlay, Panel, plot_runs};
 use crate::trajectory_error;
 use agp_planning::{EpisodeConfig, EpisodeResult, PlannerKind, Task};
 use agp_shared_types::{MAX_PATH_POINTS, Pose2};

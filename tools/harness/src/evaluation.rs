@@ -516,17 +516,17 @@ pub fn report(
     std::fs::write(&json_path, format!("{doc:#}\n"))
         .map_err(|err| anyhow!("cannot write {}: {err}", json_path.display()))?;
     let overlay = match &verdict.task {
-        Task::Place { goal } => crate::bench_tasks::Overlay::Goal(*goal),
-        Task::Trajectory { path, .. } => crate::bench_tasks::Overlay::Path(path),
+        Task::Place { goal } => crate::task_plot::Overlay::Goal(*goal),
+        Task::Trajectory { path, .. } => crate::task_plot::Overlay::Path(path),
     };
-    crate::bench_tasks::plot_runs(
+    crate::task_plot::plot_runs(
         &plot_path,
         &format!(
             "`{}` {kind}, instance `{instance}`: the object every few steps",
             scenario.name
         ),
         &scenario.object.shape,
-        &[crate::bench_tasks::Panel {
+        &[crate::task_plot::Panel {
             title: format!("{headline}: {detail}"),
             samples: &e.samples,
         }],

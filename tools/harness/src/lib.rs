@@ -29,6 +29,7 @@ pub mod seeds;
 pub mod side_by_side;
 pub mod stop;
 pub mod task_goals;
+mod task_plot;
 
 pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode};
 pub use task_goals::{PlannerSummary, median, place_goals, trajectory_error};

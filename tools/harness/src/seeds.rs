@@ -6,8 +6,10 @@
 //! constant saw. `--seed S` runs one seed, the old way (tests and quick looks).
 
 use std::fmt;
+use std::path::Path;
 use std::str::FromStr;
 
+use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 
@@ -553,6 +555,13 @@ pub fn longest_wall_time(parts: &[Value]) -> f64 {
         .map(|p| number_at(p, &["wall_time_s"]))
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max)
+}
+
+/// Writes `value` as pretty JSON (and a final newline) to `path`, naming the file when it
+/// cannot.
+pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value).context("cannot serialise the result")?;
+    std::fs::write(path, text + "\n").with_context(|| format!("cannot write `{}`", path.display()))
 }
 
 #[cfg(test)]

@@ -423,7 +423,7 @@ fn write_atomically(path: &Path, doc: &Value) -> Result<()> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(format!(".{}.tmp", std::process::id()));
     let tmp = PathBuf::from(tmp);
-    crate::bench_tasks::write_json(&tmp, doc)?;
+    crate::seeds::write_json(&tmp, doc)?;
     std::fs::rename(&tmp, path)
         .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))
 }
