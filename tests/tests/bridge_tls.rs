@@ -28,9 +28,12 @@ fn port(k: u16) -> u16 {
     30_000 + (std::process::id() % 7_000) as u16 * 5 + k
 }
 
-/// An instance name of this test process's own.
+/// An instance name of this test process's own, within the 20 characters a name may have
+/// whatever the pid: `tls`, `what` without dashes cut to 8 letters, and the pid's last five
+/// digits.
 fn instance(what: &str) -> String {
-    format!("t-tls-{what}-{}", std::process::id())
+    let what: String = what.chars().filter(|c| *c != '-').take(8).collect();
+    format!("tls{what}-{}", std::process::id() % 100_000)
 }
 
 /// `agp bridge keygen DIR` in `dir`.

@@ -53,7 +53,7 @@ fn readers(instance: &Instance, observer: &Node<AgpIpc>) -> (BTreeSet<String>, b
 }
 
 fn check(planner: &str, expected: &[&str]) {
-    let instance_name = format!("gt-{planner}-{}", std::process::id());
+    let instance_name = format!("gt-{planner}-{}", std::process::id() % 100_000);
     let ag = learned_ag("triangle");
     let dir = LaunchDir::new(&launch(&instance_name, planner, &ag));
     assert_eq!(count_instance_files(&instance_name), 0);

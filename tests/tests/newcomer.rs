@@ -130,7 +130,7 @@ fn live_launch_without_ag(name: &str) -> LaunchDir {
 
 #[test]
 fn a_detached_run_whose_planner_fails_at_start_up_exits_1_with_the_planners_error_line() {
-    let name = format!("t-detach-fail-{}", std::process::id());
+    let name = format!("t-dfail-{}", std::process::id() % 100_000);
     let dir = live_launch_without_ag(&name);
     let _down = DownOnPanic::new(dir.path(), &name);
     let run = run_agp(dir.path(), &["up", "launch.toml", "--detach"], TIMEOUT);
@@ -160,7 +160,7 @@ fn a_detached_run_whose_planner_fails_at_start_up_exits_1_with_the_planners_erro
 
 #[test]
 fn up_on_an_instance_already_up_exits_2_as_the_readme_and_help_say() {
-    let name = format!("t-already-up-{}", std::process::id());
+    let name = format!("t-upup-{}", std::process::id() % 100_000);
     let ag = learned_ag("triangle");
     let text = agp_tests::triangle_ring_launch(&name, &ag, "", "\"--mode\", \"serve\"", false);
     let dir = LaunchDir::new(&text);

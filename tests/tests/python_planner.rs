@@ -404,11 +404,10 @@ fn the_skills_executor_never_outlives_the_python_planner_that_started_it() {
         "the Python planner's children: {executor:?}"
     );
     let executor = executor[0];
+    let pid = i32::try_from(planner).expect("a pid");
     // SAFETY: kill(2) of the planner the supervisor this test started runs, by its pid.
-    assert_eq!(
-        unsafe { libc::kill(i32::try_from(planner).expect("a pid"), libc::SIGKILL) },
-        0
-    );
+    let killed = unsafe { libc::kill(pid, libc::SIGKILL) };
+    assert_eq!(killed, 0, "kill -9 the Python planner");
     // The executor ends on its parent's death (SIGTERM by PR_SET_PDEATHSIG), whether or
     // not the supervisor is still up.
     let deadline = std::time::Instant::now() + TIMEOUT;

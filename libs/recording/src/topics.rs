@@ -66,20 +66,33 @@ pub const TOPIC_COUNT: usize = 11;
 /// An implementer promises the above: [`payload_from_bytes`] reads any bytes as `Self`.
 pub unsafe trait Plain: Copy {}
 
-// SAFETY: each is #[repr(C)] of u8/u32/u64/f32/f64 fields and arrays of them, with explicit
-// padding (layout.rs's test checks every byte belongs to a field).
+// Each payload below is #[repr(C)] of u8/u32/u64/f32/f64 fields and arrays of them, with
+// explicit padding; layout.rs's test checks that every byte belongs to a field.
+// SAFETY: `IrFrame` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for IrFrame {}
+// SAFETY: `MotorCommand` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for MotorCommand {}
+// SAFETY: `Reset` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for Reset {}
+// SAFETY: `ObjectEstimate` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for ObjectEstimate {}
+// SAFETY: `GridHeader` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for GridHeader {}
+// SAFETY: `Task` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for Task {}
+// SAFETY: `Goal` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for Goal {}
+// SAFETY: `GoalEnd` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for GoalEnd {}
+// SAFETY: `ActiveEpoch` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for ActiveEpoch {}
+// SAFETY: `LearnEvent` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for LearnEvent {}
+// SAFETY: `LearnReport` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for LearnReport {}
+// SAFETY: `TimingHeader` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for TimingHeader {}
+// SAFETY: `Pose2` is such a payload (see above): any bytes of its size are a valid value.
 unsafe impl Plain for Pose2 {}
 
 /// The payload a message's data holds: `None` unless `bytes` is exactly `size_of::<T>()`

@@ -73,7 +73,10 @@ fn main() {
 fn run() -> Result<()> {
     let args = Args::parse();
     if args.clock != "lockstep" {
-        bail!("the scripted drive needs the lockstep clock, not `{}`", args.clock);
+        bail!(
+            "the scripted drive needs the lockstep clock, not `{}`",
+            args.clock
+        );
     }
     install_shutdown_handler();
     let full = Scenario::resolve(&args.scenario)?;
