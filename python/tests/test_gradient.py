@@ -41,3 +41,29 @@ def test_the_gradient_predicts_as_rust_within_1e_6(ag_file, tmp_path):
             assert abs(getattr(p, key) - want[key]) < TOLERANCE, (key, row, p)
     # The triangle's gradient answers most of the 48 rays x 13 alphas.
     assert compared > 300 and predicted > 300, (compared, predicted)
+
+
+def test_the_gradients_grids_are_views_over_the_memory_given_not_copies(ag_file, tmp_path):
+    """What `agp.run` does with the loaned samples of `agp/grids`: the gradient's grids
+    read the samples' memory in place, so a change there shows in the gradient's arrays."""
+    import ctypes
+
+    import numpy as np
+
+    from agp.payloads import GradientGrid
+
+    grids = tmp_path / "grids.bin"
+    run_reference("grids", str(ag_file), str(grids))
+    data = grids.read_bytes()
+    size = ctypes.sizeof(GradientGrid)
+    samples = [(ctypes.c_uint8 * size).from_buffer_copy(data[k * size : (k + 1) * size]) for k in range(len(data) // size)]
+    ag = Gradient.from_buffers(samples)
+    layer = ag.layers[0]
+    for kind, grid in layer.grids.items():
+        assert not grid.flags["OWNDATA"], kind
+    # One cell of the first sample's grid, written in the sample, is read by the gradient.
+    first = GradientGrid.from_buffer(samples[0])
+    kind, alpha = first.header.kind, first.header.alpha_deg
+    view = next(l for l in ag.layers if l.alpha_deg == alpha).grids[kind]
+    first.cells[0] = 1234.5
+    assert view[0] == np.float32(1234.5)

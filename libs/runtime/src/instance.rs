@@ -400,6 +400,7 @@ impl Qos {
             max_publishers: 4,
             max_subscribers: 8,
             tap: 1024,
+            borrowed: 2,
         }
     }
 }
@@ -433,6 +434,10 @@ struct Qos {
     /// lockstep speed, the recorder, asks for this much ([`TAP_DEPTH`]) on the topics it
     /// records; the pipeline's subscribers keep `buffer`.
     tap: usize,
+    /// How many samples one subscriber may hold at once: 2 on every topic but the grids,
+    /// where a reader may keep a whole set and read it in place (the Python package's
+    /// gradient is numpy views over the held samples).
+    borrowed: usize,
 }
 
 /// The buffer of a tap on a stream or command topic: 4096 messages, 6.4 s at 640 Hz, so a
@@ -450,6 +455,7 @@ impl Qos {
             max_publishers: 4,
             max_subscribers: 8,
             tap: TAP_DEPTH,
+            borrowed: 2,
         }
     }
 
@@ -484,6 +490,7 @@ impl Qos {
             max_publishers: 6,
             max_subscribers: 4,
             tap: TAP_DEPTH,
+            borrowed: 2,
         }
     }
 
@@ -492,9 +499,10 @@ impl Qos {
     /// so a late or restarted reader gets all of it, and fitting each reader's buffer, so a
     /// reader that drains only after the publication loses none.
     ///
-    /// Each publisher preallocates `max_subscribers * (buffer + 2 borrowed) + history + 2
-    /// loaned` samples: 690 grids, about 45 MB of shared memory. Subscribers: the planner,
-    /// a hot-swapped one beside it, and one tool or test.
+    /// A reader may hold a whole set (`borrowed`), so it can read the gradient in place for
+    /// as long as it plans on it. Each publisher preallocates `max_subscribers * (buffer +
+    /// borrowed) + history + 2 loaned` samples: 1,226 grids, about 80 MB of shared memory.
+    /// Subscribers: the planner, a hot-swapped one beside it, and one tool or test.
     fn grids() -> Self {
         let set = GRIDS_PER_ALPHA * MAX_GRID_ALPHAS;
         Self {
@@ -503,6 +511,7 @@ impl Qos {
             max_publishers: 4,
             max_subscribers: 4,
             tap: set,
+            borrowed: set,
         }
     }
 
@@ -525,6 +534,7 @@ impl Qos {
             max_publishers: 4,
             max_subscribers: 8,
             tap: 2,
+            borrowed: 2,
         }
     }
 }
@@ -584,6 +594,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + 'static> Topic<T> {
                 .publish_subscribe::<T>()
                 .history_size(qos.history)
                 .subscriber_max_buffer_size(qos.buffer.max(qos.history).max(qos.tap))
+                .subscriber_max_borrowed_samples(qos.borrowed)
                 .max_publishers(qos.max_publishers)
                 .max_subscribers(qos.max_subscribers)
                 .max_nodes(16)

@@ -101,7 +101,8 @@ class Gradient:
     Build it with `Gradient.from_buffers` (any buffers holding `GradientGrid`s: a file of
     them, or the samples of `agp/grids`). Layers are in ascending alpha; `alphas_deg` lists
     them. The grids are numpy views over the buffers given (no copy); `agp.run` hands the
-    planner one over its own copy of the samples, which it must give back to iceoryx2."""
+    planner one over the loaned samples of `agp/grids` themselves, which the gradient holds
+    (`hold`) for as long as it lives."""
 
     def __init__(self, layers: list[Layer], cell_size_m: float, origin_m: tuple[float, float], seq: int):
         if not layers:
@@ -118,6 +119,12 @@ class Gradient:
         #: S over every alpha, normalised to [0, 1] (`combined_shape`), flat.
         self.shape = total * (_F1 / peak) if peak > 0 else np.zeros_like(total)
         self._aims: dict[float, tuple[float, float] | None] = {}
+        self._held: object = None
+
+    def hold(self, owner: object) -> None:
+        """Keeps `owner` (what owns the memory the grids are views of: loaned samples and
+        their subscriber) alive as long as this gradient."""
+        self._held = owner
 
     @classmethod
     def from_buffers(cls, buffers: Iterable) -> "Gradient":

@@ -386,9 +386,11 @@ def _die_with_parent() -> None:
 
 
 def _read_gradient(node: Node, timeout_s: float = 120.0) -> Gradient:
-    """The newest complete grid set on `agp/grids` (from the topic's history), each grid
-    copied once out of its sample (a subscriber may borrow 2 samples at a time, a set has
-    3 x 17)."""
+    """The newest complete grid set on `agp/grids` (from the topic's history), read in
+    place: every grid of the gradient is a numpy view over its loaned sample, and the
+    gradient holds those samples (and their subscriber) for as long as it lives. The
+    service lets one reader hold a whole set (`Qos::grids` in agp-runtime). A set that a
+    newer one overtook before it was complete is handed back at once."""
     sub = node.pubsub("agp/grids", GradientGrid).subscriber_builder().create()
     sets: dict[int, list] = {}
     need: dict[int, int] = {}
@@ -396,15 +398,25 @@ def _read_gradient(node: Node, timeout_s: float = 120.0) -> Gradient:
     size = ctypes.sizeof(GradientGrid)
     while True:
         while (s := sub.receive()) is not None:
-            buf = np.empty(size, dtype=np.uint8)
-            ctypes.memmove(buf.ctypes.data, s.payload_ptr, size)
-            s.delete()
-            h = GradientGrid.from_buffer(buf).header
-            sets.setdefault(h.seq, []).append(buf)
+            h = GradientGrid.from_address(s.payload_ptr).header
+            if h.seq not in sets:
+                # History delivers in publication order: an older set still incomplete
+                # when a newer one starts never completes.
+                for seq in [q for q in sets if q < h.seq and len(sets[q]) < need[q]]:
+                    for old, _ in sets.pop(seq):
+                        old.delete()
+            sets.setdefault(h.seq, []).append((s, (ctypes.c_uint8 * size).from_address(s.payload_ptr)))
             need[h.seq] = h.alpha_count * GRIDS_PER_ALPHA
         complete = [seq for seq, grids in sets.items() if len(grids) >= need[seq]]
         if complete:
-            return Gradient.from_buffers(sets[max(complete)])
+            newest = max(complete)
+            for seq in [q for q in sets if q != newest]:
+                for old, _ in sets.pop(seq):
+                    old.delete()
+            held = sets[newest]
+            ag = Gradient.from_buffers(view for _, view in held)
+            ag.hold((sub, [sample for sample, _ in held]))
+            return ag
         if pipeline.stop_requested():
             raise Shutdown()
         if time.monotonic() > deadline:
