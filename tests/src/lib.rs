@@ -659,3 +659,30 @@ pub fn alloc_counts(output: &str, process: &str, work: &str) -> Option<AllocCoun
         allocating: number_after(", in ")?,
     })
 }
+
+/// `.venv-ci/bin/python` at the repository's root (or `AGP_PYTHON`) that can import each of
+/// `modules` (`agp`, `iceoryx2`, ...); panics in one line naming the set-up command when it
+/// cannot. `tools/setup.sh`, which the README's test command runs first, makes it.
+#[track_caller]
+pub fn python_with(modules: &[&str]) -> PathBuf {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ sits in the repository");
+    let python = std::env::var_os("AGP_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo.join(".venv-ci/bin/python"));
+    let ok = Command::new(&python)
+        .args(["-c", &format!("import {}", modules.join(", "))])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ok,
+        "no Python with {} at {}: run `tools/setup.sh` at the repository's root (it makes .venv-ci and installs ./python), or set AGP_PYTHON to such an interpreter",
+        modules.join(", "),
+        python.display()
+    );
+    python
+}

@@ -16,31 +16,9 @@ fn repo() -> PathBuf {
         .to_path_buf()
 }
 
-/// `.venv-ci/bin/python` (or `AGP_PYTHON`) with the `agp` package, numpy, pytest and
-/// iceoryx2; panics in one line naming the set-up command when it is not there.
-#[track_caller]
-pub fn python_with_agp() -> PathBuf {
-    let python = std::env::var_os("AGP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join(".venv-ci/bin/python"));
-    let ok = Command::new(&python)
-        .args(["-c", "import agp, iceoryx2, numpy, pytest"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ok,
-        "no Python with the `agp` package (and iceoryx2, numpy, pytest) at {}: run `tools/setup.sh` at the repository's root (it makes .venv-ci and installs ./python), or set AGP_PYTHON to such an interpreter",
-        python.display()
-    );
-    python
-}
-
 #[test]
 fn the_python_package_passes_its_tests_against_the_rust_layouts_and_predictions() {
-    let python = python_with_agp();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy", "pytest"]);
     let reference = bin_path("agp-py-reference");
     let ag = learned_ag("triangle");
     let out = Command::new(&python)

@@ -16,7 +16,6 @@
 //! name the set-up command.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use agp_runtime::Instance;
@@ -54,28 +53,6 @@ fn python_wrapper(dir: &Path, python: &Path) -> String {
     std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
         .expect("make the wrapper executable");
     path.display().to_string()
-}
-
-/// `.venv-ci/bin/python` (or `AGP_PYTHON`) with the `agp` package; panics in one line
-/// naming the set-up command when it is missing.
-#[track_caller]
-fn python() -> PathBuf {
-    let python = std::env::var_os("AGP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join(".venv-ci/bin/python"));
-    let ok = Command::new(&python)
-        .args(["-c", "import agp, iceoryx2, numpy"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ok,
-        "no Python with the `agp` package at {}: run `tools/setup.sh` at the repository's root (it makes .venv-ci and installs ./python), or set AGP_PYTHON to such an interpreter",
-        python.display()
-    );
-    python
 }
 
 /// The example's launch.toml as shipped, but for where things are: its planner run by
@@ -178,7 +155,7 @@ fn down(dir: &Path, name: &str, up: AgpUp) {
 #[test]
 fn the_push_level_python_planner_places_the_triangle_from_the_shipped_launch_file() {
     let name = "t-py-push-place";
-    let python = python();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
     let dir = LaunchDir::new(&shipped_launch(&python));
     std::fs::create_dir_all(dir.results()).expect("the results folder");
     std::fs::copy(learned_ag("triangle"), dir.results().join("triangle.ag"))
@@ -205,7 +182,7 @@ fn the_push_level_python_planner_places_the_triangle_from_the_shipped_launch_fil
 #[test]
 fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_back_mid_goal() {
     let name = "t-py-push-swap";
-    let python = python();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
     let wrappers = tempfile::tempdir().expect("a folder");
     let python_s = python_wrapper(wrappers.path(), &python);
     let ag = learned_ag("triangle");
@@ -263,7 +240,7 @@ fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_b
 #[test]
 fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_without_losing_a_step() {
     let name = "t-py-wheels-serve";
-    let python = python();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
     let wrappers = tempfile::tempdir().expect("a folder");
     let python_s = python_wrapper(wrappers.path(), &python);
     let args = vec![
@@ -314,7 +291,7 @@ fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_witho
 #[test]
 fn the_wheel_level_python_planner_carries_on_after_a_physics_restart() {
     let name = "t-py-wheels-restart";
-    let python = python();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
     let wrappers = tempfile::tempdir().expect("a folder");
     let python_s = python_wrapper(wrappers.path(), &python);
     let args = [
@@ -373,7 +350,7 @@ fn children(pid: u32) -> Vec<u32> {
 #[test]
 fn the_skills_executor_never_outlives_the_python_planner_that_started_it() {
     let name = "t-py-push-orphan";
-    let python = python();
+    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
     let wrappers = tempfile::tempdir().expect("a folder");
     let python_s = python_wrapper(wrappers.path(), &python);
     let args = vec![
