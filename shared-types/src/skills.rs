@@ -1,5 +1,5 @@
 //! The push-level service: a planner process of its own (the `agp` Python package's
-//! `PushPlanner`) chooses each push; `agp-planner --mode skills` carries it out with the
+//! `PushPlanner`) chooses each push; `agp-planner --skills` carries it out with the
 //! planning library's skills (travel to the contact point, the push, the circling that
 //! re-estimates the object). The executor asks on [`PUSH_REQUESTS`], the chooser answers
 //! on [`PUSH_CHOICES`]; both carry the planner's epoch, so during a hot swap each executor
