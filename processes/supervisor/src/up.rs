@@ -1,10 +1,11 @@
-//! `agp up`: owns one instance for the length of a run: its lock, its iceoryx2 services, its
-//! processes, and the removal of every file it leaves.
+//! `agp up`: its arguments and the checks before anything starts, then the run, which owns
+//! one instance for its length: its lock, its iceoryx2 services, its processes, and the
+//! removal of every file it leaves. `--detach` is in `detach.rs`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use agp_launch::{LaunchConfig, RECORDER_PROCESS};
+use agp_launch::{LaunchConfig, LaunchOptions, RECORDER_PROCESS};
 use agp_runtime::{AgpIpc, Instance, InstanceLock, Topic, WaitStrategy};
 use agp_shared_types::{
     GradientGrid, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, Task,
@@ -16,11 +17,73 @@ use agp_world::Scenario;
 
 use crate::console::{Log, say, warn};
 use crate::control_plane::ControlPlane;
+use crate::detach;
 use crate::run_end::{RunEnd, exit};
 use crate::signals;
 use crate::slot::{Slot, SlotState, alive_nodes, describe};
 use agp_harness::evaluation::{self, RunJudge};
 use agp_runtime::children::signal_group;
+use agp_supervisor::{BRIDGE_CHECKS, CheckProcesses};
+
+/// Start the processes of a launch file under one instance (see `agp up --help`).
+#[derive(Debug, clap::Args)]
+pub struct UpArgs {
+    /// The launch file.
+    #[arg(default_value = "launch.toml")]
+    pub launch: PathBuf,
+    /// Run under this instance name instead of the file's.
+    #[arg(long)]
+    pub instance: Option<String>,
+    /// Return once every process is past start-up (running for 2 s, none restarted),
+    /// leaving the supervisor in the background (its output goes to
+    /// `agp-up-<instance>.log` in the results folder); stop it with `agp down`. A process
+    /// that fails at start-up stops the run, and its error line is printed (exit 1).
+    #[arg(long)]
+    pub detach: bool,
+}
+
+/// `agp up`: validates the launch file whole (nothing starts on a bad one, exit 2), refuses
+/// an instance another supervisor holds (exit 2), then runs it here or in the background.
+pub fn start(args: &UpArgs) -> Result<u8> {
+    // Every child inherits it: a value that names no strategy is refused here, not guessed.
+    if let Err(why) = agp_runtime::WaitStrategy::from_env_checked() {
+        warn(format_args!("agp: error: {why}"));
+        warn(format_args!("agp: nothing was started"));
+        return Ok(exit::INVALID);
+    }
+    let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+    let options = LaunchOptions {
+        instance: args.instance.clone(),
+        exe_dir: exe.parent().map(PathBuf::from).unwrap_or_default(),
+        remote_checks: Some(BRIDGE_CHECKS),
+    };
+    let config = match LaunchConfig::load(&args.launch, &options)
+        .and_then(|c| c.check_processes().map(|()| c))
+    {
+        Ok(c) => c,
+        Err(e) => {
+            for line in e.to_string().lines() {
+                warn(format_args!("agp: error: {line}"));
+            }
+            warn(format_args!("agp: nothing was started"));
+            return Ok(exit::INVALID);
+        }
+    };
+    // An instance another supervisor holds is refused before anything starts, exit 2.
+    match InstanceLock::acquire(&crate::control::instance_named(&config.instance)?) {
+        Ok(lock) => drop(lock),
+        Err(e @ agp_runtime::InstanceLockError::Held { .. }) => {
+            warn(format_args!("agp: error: {e}"));
+            warn(format_args!("agp: nothing was started"));
+            return Ok(exit::INVALID);
+        }
+        Err(e) => return Err(e.into()),
+    }
+    if args.detach && std::env::var_os(detach::DETACHED_ENV).is_none() {
+        return detach::detach(&args.launch, args.instance.as_deref(), &config);
+    }
+    up(&config)
+}
 
 /// How often the supervisor looks at its children and its signal flags.
 const POLL: Duration = Duration::from_millis(10);
