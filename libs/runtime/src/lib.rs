@@ -1,4 +1,4 @@
-//! The iceoryx2 runtime every agp process shares: the service type, an instance's config and services, waiting, the lockstep driver, the control client and the allocation counter.
+//! The iceoryx2 runtime every agp process shares: the service type, an instance's config and services, waiting, the lockstep driver, the control client, a hot swap's swapped-in side and the allocation counter.
 //!
 //! Payloads and service names are `agp_shared_types`'s; this crate opens the services under
 //! those names, with one quality of service per topic, for every process of an instance.
@@ -11,6 +11,7 @@ mod instance;
 mod instance_lock;
 mod owner_only_storage;
 mod service;
+mod swap_in;
 mod wait;
 
 pub use driver::{DriveError, LockstepDriver, TruthAccess};
@@ -29,6 +30,7 @@ pub use instance::{
 };
 pub use instance_lock::{InstanceLock, InstanceLockError};
 pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};
+pub use swap_in::{SwapIn, SwapInError};
 pub use wait::{
     WaitOutcome, WaitStrategy, Waiter, install_shutdown_handler, request_shutdown,
     shutdown_requested,

@@ -10,9 +10,8 @@ mod task_mode;
 use std::time::Duration;
 
 use agp_planning::PlannerKind;
-use agp_runtime::control_client::ControlClient;
-use agp_runtime::{AgpIpc, Instance, LockstepDriver, alloc_count, install_shutdown_handler};
-use agp_shared_types::{ControlKind, ControlRequest, Pose2, TaskKind, monotonic_ns};
+use agp_runtime::{Instance, alloc_count, install_shutdown_handler};
+use agp_shared_types::{Pose2, TaskKind};
 use agp_world::Scenario;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
@@ -133,51 +132,6 @@ fn clock_refusal(args: &Args) -> Option<String> {
             "`--learn-if-missing` may run the learning phase, which needs the lockstep clock: learn first (`agp up` with launch.toml, or `agp bench learn`), then run without it".to_owned(),
         ),
         Mode::Place | Mode::Trajectory | Mode::Serve => None,
-    }
-}
-
-/// The planner's half of a hot swap (pipeline.md, "Hot-swapping the planner").
-struct SwapIn {
-    client: ControlClient,
-    _node: iceoryx2::prelude::Node<AgpIpc>,
-    epoch: u64,
-    ready_ns: u64,
-}
-
-impl SwapIn {
-    /// Tells the supervisor this planner is ready, then waits until its epoch drives.
-    fn start(instance: &Instance, driver: &mut LockstepDriver) -> Result<Option<Self>> {
-        let epoch = driver.epoch();
-        if epoch == 0 {
-            return Ok(None);
-        }
-        let node = instance
-            .node(&format!("planner-swap-{epoch}"), false)
-            .map_err(|e| anyhow::anyhow!("cannot create the swap node: {e:?}"))?;
-        let client = ControlClient::open(instance, &node, TIMEOUT)
-            .context("cannot reach the supervisor for the swap")?;
-        let ready_ns = monotonic_ns();
-        let mut request = ControlRequest::new(ControlKind::Ready);
-        request.epoch = epoch;
-        // A restart of a swapped-in planner finds its epoch active already: the supervisor
-        // then refuses the `Ready`, and `take_over` returns at once.
-        client.ask(&request, TIMEOUT)?;
-        driver.take_over(TIMEOUT)?;
-        Ok(Some(Self {
-            client,
-            _node: node,
-            epoch,
-            ready_ns,
-        }))
-    }
-
-    /// Reports the handover (ready -> first command applied) from the first frame after it.
-    fn driving(self, applied_ns: u64) -> Result<()> {
-        let mut request = ControlRequest::new(ControlKind::Driving);
-        request.epoch = self.epoch;
-        request.value_ns = applied_ns.saturating_sub(self.ready_ns);
-        self.client.ask(&request, TIMEOUT)?;
-        Ok(())
     }
 }
 

@@ -25,7 +25,7 @@ use agp_planning::{
     EpisodeConfig, EpisodeResult, ExternalPush, PlannerKind, PushQuery, Senses, Task, World,
     WorldStepError, drive_episode,
 };
-use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess};
+use agp_runtime::{AgpIpc, DriveError, Instance, LockstepDriver, SwapIn, TruthAccess};
 use agp_shared_types::{LearnEvent, MAX_PATH_POINTS, ObjectEstimate, Pose2, TaskKind, stage};
 use agp_world::{Pose, RobotDescription, ScenarioBrief};
 use anyhow::{Context, Result, anyhow, bail};
@@ -33,7 +33,6 @@ use glam::DVec2;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::Node;
 
-use crate::SwapIn;
 use crate::grid_link::GridLink;
 use crate::push_service::{Pending, PushService};
 use crate::ring::{EstimatorLink, EstimatorRestarted, Ring};
@@ -125,7 +124,7 @@ impl World for PipelineWorld {
         })?;
         if let Some(s) = self.swap_in.take() {
             let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
-            s.driving(applied)
+            s.driving(applied, crate::TIMEOUT)
                 .map_err(|e| WorldStepError::Link(format!("{e:#}")))?;
         }
         Ok(())
@@ -307,13 +306,13 @@ impl Session {
             }
             Err(e) => return Err(e).context("waiting for the estimator's first estimate"),
         };
-        let swap_in = match SwapIn::start(instance, &mut ring.driver) {
+        let swap_in = match SwapIn::start(instance, &mut ring.driver, crate::TIMEOUT) {
             Ok(s) => s,
             Err(e) if agp_runtime::shutdown_requested() => {
                 let _ = e;
                 return Ok(None);
             }
-            Err(e) => return Err(e),
+            Err(e) => return Err(e.into()),
         };
         let served_seq = ring.estimate().grids_seq;
         let mut world = PipelineWorld {

@@ -20,12 +20,11 @@ use std::time::Duration;
 
 use agp_perception::{ObjectTracker, TrackerConfig};
 use agp_planning::{PushPhase, PushRoutine, PushSettings};
-use agp_runtime::control_client::ControlClient;
 use agp_runtime::{
-    AgpIpc, DriveError, Instance, LockstepDriver, TruthAccess, install_shutdown_handler,
+    DriveError, Instance, LockstepDriver, SwapIn, TruthAccess, install_shutdown_handler,
 };
 use agp_shared_types::angle::wrap_angle;
-use agp_shared_types::{ControlKind, ControlRequest, Pose2, monotonic_ns, stage};
+use agp_shared_types::{Pose2, stage};
 use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 use clap::Parser;
@@ -89,52 +88,6 @@ fn run() -> Result<()> {
     script(&instance, &name, placement, &args)
 }
 
-/// The swapped-in drive's half of a hot swap (pipeline.md, "Hot-swapping the planner"),
-/// as the planner's.
-struct SwapIn {
-    client: ControlClient,
-    _node: iceoryx2::prelude::Node<AgpIpc>,
-    epoch: u64,
-    ready_ns: u64,
-}
-
-impl SwapIn {
-    /// Tells the supervisor this drive is ready, then waits until its epoch drives.
-    fn start(instance: &Instance, driver: &mut LockstepDriver) -> Result<Option<Self>> {
-        let epoch = driver.epoch();
-        if epoch == 0 {
-            return Ok(None);
-        }
-        let node = instance
-            .node(&format!("planner-swap-{epoch}"), false)
-            .map_err(|e| anyhow::anyhow!("cannot create the swap node: {e:?}"))?;
-        let client = ControlClient::open(instance, &node, TIMEOUT)
-            .context("cannot reach the supervisor for the swap")?;
-        let ready_ns = monotonic_ns();
-        let mut request = ControlRequest::new(ControlKind::Ready);
-        request.epoch = epoch;
-        // A restart of a swapped-in drive finds its epoch active already: the supervisor
-        // then refuses the `Ready`, and `take_over` returns at once.
-        client.ask(&request, TIMEOUT)?;
-        driver.take_over(TIMEOUT)?;
-        Ok(Some(Self {
-            client,
-            _node: node,
-            epoch,
-            ready_ns,
-        }))
-    }
-
-    /// Reports the handover (ready -> first command applied) from the first frame after it.
-    fn driving(self, applied_ns: u64) -> Result<()> {
-        let mut request = ControlRequest::new(ControlKind::Driving);
-        request.epoch = self.epoch;
-        request.value_ns = applied_ns.saturating_sub(self.ready_ns);
-        self.client.ask(&request, TIMEOUT)?;
-        Ok(())
-    }
-}
-
 fn script(instance: &Instance, scenario: &str, obj: Pose2, args: &Args) -> Result<()> {
     let robot = RobotDescription::epuck();
     // Without an estimator the scripted drive perceives for itself, with its code.
@@ -150,10 +103,10 @@ fn script(instance: &Instance, scenario: &str, obj: Pose2, args: &Args) -> Resul
         Err(DriveError::Shutdown) => return Ok(()),
         Err(e) => return Err(e).context("cannot reach physics"),
     };
-    let mut swap_in = match SwapIn::start(instance, &mut driver) {
+    let mut swap_in = match SwapIn::start(instance, &mut driver, TIMEOUT) {
         Ok(s) => s,
         Err(_) if agp_runtime::shutdown_requested() => return Ok(()),
-        Err(e) => return Err(e),
+        Err(e) => return Err(e.into()),
     };
     let settings = PushSettings {
         push_duration: args.push_ms as f64 * 1e-3,
@@ -207,7 +160,7 @@ fn script(instance: &Instance, scenario: &str, obj: Pose2, args: &Args) -> Resul
                 let next = driver.step(l, r)?;
                 if let Some(s) = swap_in.take() {
                     let applied = next.timing.stamps_ns[stage::COMMAND_APPLIED];
-                    s.driving(applied)
+                    s.driving(applied, TIMEOUT)
                         .map_err(|e| DriveError::Port(format!("{e:#}")))?;
                 }
             }
