@@ -221,11 +221,19 @@ class Ring:
     """The ring for a wheel-level planner: `step(l, r)` sends the command answering the
     latest frame and returns once a later frame and its estimate are in."""
 
-    def __init__(self, node: Node, epoch: int, token: int):
+    def __init__(self, node: Node, epoch: int, token: int, buffer: int | None = None):
+        """`buffer`: how many frames and estimates the subscribers keep (the newest); None,
+        the services' most. 1 suits a reader of the newest alone, as the Gymnasium
+        environment with physics holding each command for several steps."""
         self.node, self.epoch, self.token = node, epoch, token
         self.timeout_s = node.timeout_s
-        self.frames = node.pubsub("agp/ir_frames", IrFrame).subscriber_builder().create()
-        self.estimates = node.pubsub("agp/estimates", ObjectEstimate).subscriber_builder().create()
+
+        def subscriber(name, t):
+            b = node.pubsub(name, t).subscriber_builder()
+            return (b.buffer_size(buffer) if buffer else b).create()
+
+        self.frames = subscriber("agp/ir_frames", IrFrame)
+        self.estimates = subscriber("agp/estimates", ObjectEstimate)
         self.estimates_ev = node.event("agp/estimates.ev").listener_builder().create()
         self.commands = node.pubsub("agp/motor_commands", MotorCommand).publisher_builder().create()
         self.physics_inbox = node.event("agp/physics_inbox.ev").notifier_builder().create()
@@ -290,13 +298,18 @@ class Ring:
                 s.delete()
         while (s := self.frames.receive()) is not None:
             f = IrFrame.from_address(s.payload_ptr)
-            base, step = (f.timing.trace_id - f.step) & U64, f.step
+            base, step, reset = (f.timing.trace_id - f.step) & U64, f.step, f.reset_seq
             del f
             if self._run_base is not None and base != self._run_base:
                 self._run_base = base
                 self.restarted = True
                 self._hold_frame(s)
-            elif self._frame_s is None or step > self.frame.step or self.restarted:
+            elif (
+                self._frame_s is None
+                or step > self.frame.step
+                or self.restarted
+                or (step == self.frame.step and reset != self.frame.reset_seq)  # a reset's frame
+            ):
                 self._run_base = base
                 self._hold_frame(s)
             else:
@@ -318,15 +331,20 @@ class Ring:
             and self._took_in(e)
         )
 
-    def _wait(self, after_step: int) -> None:
-        """Until `_paired`: polls for up to `spin_s` (`AGP_WAIT`'s spin, as the Rust
+    def wait_reset(self, seq: int) -> None:
+        """Until the frame of reset `seq` (physics publishes the same step again, the world
+        as the reset put it) and its estimate are in."""
+        self._wait(-1, reset_seq=seq)
+
+    def _wait(self, after_step: int, reset_seq: int | None = None) -> None:
+        """Until `_paired` (and, with `reset_seq`, the frame is of that reset): polls for up to `spin_s` (`AGP_WAIT`'s spin, as the Rust
         processes' default `spin-then-block:200`), then blocks on the estimates' event."""
         deadline = time.monotonic() + self.timeout_s
         wait = iox2.Duration.from_millis(20)
         spin_until = time.perf_counter() + self.spin_s
         while True:
             self._drain()
-            if self._paired(after_step):
+            if self._paired(after_step) and (reset_seq is None or self.frame.reset_seq == reset_seq):
                 self.received_ns = time.monotonic_ns()
                 return
             if self.spin_s > 0.0 and time.perf_counter() < spin_until:
@@ -367,12 +385,13 @@ class Ring:
         self.physics_inbox.notify()
         self.steps += 1
 
-    def step(self, left_mps: float, right_mps: float) -> None:
-        """Sends wheel speeds (m/s) for the latest frame; returns once the next is in. Raises
-        `PhysicsRestarted` when the frame that came is a restarted physics's (it is then the
-        latest, answered by the next step)."""
+    def step(self, left_mps: float, right_mps: float, steps: int = 1) -> None:
+        """Sends wheel speeds (m/s) for the latest frame; returns once the next is in (with
+        `steps` > 1, the frame `steps` later: physics started with `--hold-steps steps`
+        holds each command that long). Raises `PhysicsRestarted` when the frame that came is
+        a restarted physics's (it is then the latest, answered by the next step)."""
         self.send(left_mps, right_mps)
-        self._wait(self.frame.step)
+        self._wait(self.frame.step + steps - 1)
         if self.restarted:
             self.restarted = False
             raise PhysicsRestarted()
