@@ -45,6 +45,11 @@
 //! server on port 8765 (`view = PORT` for another port, 0 for any free one), as a process
 //! named `view` after the others.
 //!
+//! `learn = "online"` (top level; default `"first"`) places an object never pushed before:
+//! no learning phase and no AG file; the estimator builds the contact prior from the task's
+//! first circling and learns on from its pushes (see [`LearnMode`]). The plan gives the
+//! `agp-estimator` and `agp-planner` processes their flags for it.
+//!
 //! `record = "FILE.mcap"` (top level; relative: to this file) also records every topic of
 //! the instance into FILE with `agp record`, as a process named `recorder` started before
 //! the others (so it has subscribed when physics publishes), stopped with them.
@@ -65,6 +70,8 @@ use std::time::Duration;
 use agp_shared_types::{InstanceNameError, ROOT_ENV, WaitStrategy, validate_instance_name};
 use serde::Deserialize;
 use toml::Spanned;
+
+pub use crate::learn_mode::LearnMode;
 
 /// Names `scenario` may take without being a file.
 pub use agp_world::BUILTIN_NAMES as BUILTIN_SCENARIOS;
@@ -113,6 +120,9 @@ pub struct LaunchConfig {
     /// `record = "FILE"`: the recording's absolute path (its `recorder` process is the
     /// first of `processes`).
     pub record: Option<PathBuf>,
+    /// `learn`: where the object's gradient comes from; `online` has given the processes
+    /// their flags already.
+    pub learn: LearnMode,
 }
 
 /// Where the scenario comes from.
@@ -416,6 +426,17 @@ pub enum LaunchFaultKind {
     /// `--check`).
     #[error("process `{process}`: {reason}")]
     ProcessRefused { process: String, reason: String },
+    /// `learn` is not a learn mode.
+    #[error(
+        "unknown learn mode `{0}`; expected `first` (learn the gradient first, or load its AG file) or `online` (an object never pushed: learn it from the task's own pushes)"
+    )]
+    UnknownLearnMode(String),
+    /// `learn = "online"` cannot run with these processes.
+    #[error("{}{reason}", .process.as_ref().map_or(String::new(), |p| format!("process `{p}`: ")))]
+    LearnConflict {
+        process: Option<String>,
+        reason: String,
+    },
     /// `restart.policy` is not a policy.
     #[error("unknown policy `{0}`; expected `never`, `on-failure` or `always`")]
     UnknownPolicy(String),
@@ -439,6 +460,7 @@ struct RawLaunch {
     process: Vec<Spanned<RawProcess>>,
     record: Option<Spanned<String>>,
     view: Option<Spanned<RawView>>,
+    learn: Option<Spanned<String>>,
 }
 
 /// `view = true | false | PORT`.
@@ -644,6 +666,30 @@ impl LaunchConfig {
             processes.insert(0, p);
         }
 
+        let learn = match &raw.learn {
+            None => LearnMode::default(),
+            Some(word) => match LearnMode::from_word(word.get_ref().as_str()) {
+                Some(mode) => mode,
+                None => {
+                    check.fault_at(
+                        word,
+                        LaunchFaultKind::UnknownLearnMode(word.get_ref().clone()),
+                    );
+                    LearnMode::default()
+                }
+            },
+        };
+        for c in crate::learn_mode::apply(learn, &mut processes) {
+            let kind = LaunchFaultKind::LearnConflict {
+                process: c.process,
+                reason: c.reason,
+            };
+            match &raw.learn {
+                Some(word) => check.fault_at(word, kind),
+                None => check.fault(kind),
+            }
+        }
+
         if !check.faults.is_empty() {
             check.faults.sort_by_key(|f| f.line.unwrap_or(0));
             return Err(refuse(check.faults));
@@ -656,6 +702,7 @@ impl LaunchConfig {
             clock,
             processes,
             record,
+            learn,
         })
     }
 
@@ -1405,6 +1452,38 @@ mod tests {
         ];
         assert_eq!(rec.args, expected);
         assert_eq!(config.processes[1].name, "physics");
+    }
+
+    #[test]
+    fn a_learn_key_of_online_gives_the_estimator_and_the_planner_their_flags() {
+        let f = Fixture::new();
+        for exe in ["bin/agp-estimator", "bin/agp-planner"] {
+            let path = f.dir.path().join(exe);
+            std::fs::write(&path, "#!/bin/sh\n").expect("write");
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+        }
+        let text = "instance = \"onl\"\nscenario = \"triangle\"\nlearn = \"online\"\n\
+                    [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--reuse\"]\n\
+                    [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
+                    args = [\"--mode\", \"place\", \"--learn-if-missing\"]\n";
+        let config = f.parse(text).expect("a valid file");
+        assert_eq!(config.learn, LearnMode::Online);
+        assert_eq!(config.processes[0].args, ["--learn-online", "--from-prior"]);
+        assert_eq!(
+            config.processes[1].args,
+            ["--mode", "place", "--from-prior"]
+        );
+        // Any other word is refused at its line, naming both modes.
+        let (line, shown, _) = f.fault(&text.replace("\"online\"", "\"later\""));
+        assert_eq!(line, Some(3));
+        assert!(
+            shown.contains("unknown learn mode `later`") && shown.contains("`online`"),
+            "{shown}"
+        );
+        // An estimator told to load a file cannot learn from nothing.
+        let (line, shown, _) = f.fault(&text.replace("--reuse", "--perceive-only"));
+        assert_eq!(line, Some(3));
+        assert!(shown.contains("process `estimator`"), "{shown}");
     }
 
     #[test]

@@ -15,8 +15,9 @@
 //! ```
 
 use agp_affordance::{
-    AffordanceGradient, Grid, MIN_MATCH_POINTS, MatchedPose, Prediction, PushPredictor,
-    ShapeMatcher, ShapeMatcherBuildError, ShapeMatcherConfig, symmetry_order_of,
+    AffordanceGradient, ContactPriorBuildError, ContactPriorConfig, Grid, MIN_MATCH_POINTS,
+    MatchedPose, Prediction, PushPredictor, ShapeMatcher, ShapeMatcherBuildError,
+    ShapeMatcherConfig, symmetry_order_of,
 };
 use agp_shared_types::{LearnEvent, LearnEventKind, ObjectEstimate, Pose2, angle};
 use agp_world::{BORDER_MAX_SIGMA, Pose, RobotDescription, ir_border_point};
@@ -236,6 +237,11 @@ pub struct ObjectTracker {
     generation: u64,
     /// The latest push learned.
     last_learned: Option<LearnedPush>,
+    /// An object never pushed: the object's name and the prior to build from the first
+    /// circling, while no gradient is given ([`ObjectTracker::start_from_prior`]).
+    prior: Option<(String, ContactPriorConfig)>,
+    /// Why the last circling gave no prior, if it did not.
+    prior_error: Option<ContactPriorBuildError>,
 }
 
 impl ObjectTracker {
@@ -287,6 +293,8 @@ impl ObjectTracker {
             pending: None,
             generation: 0,
             last_learned: None,
+            prior: None,
+            prior_error: None,
             config,
         })
     }
@@ -322,6 +330,55 @@ impl ObjectTracker {
             symmetry_order: order,
         }));
         Ok(())
+    }
+
+    /// An object never pushed (no learning phase, no AG file): the first circling that
+    /// closes, or gathers enough points, gives the gradient, the prior
+    /// [`agp_affordance::contact_prior`] builds from its border points alone (their
+    /// centroid the object frame's origin, the axes the world's), which
+    /// [`ObjectTracker::set_gradient`] then takes, and the circling is matched to its S
+    /// (so the object's pose is the border's centroid, orientation 0, or a turn the S's
+    /// symmetry allows). With online learning on, the task's pushes learn on from there.
+    /// The prior's start clearance is the tracker's (body radius plus start gap). Does
+    /// nothing once a gradient is given.
+    pub fn start_from_prior(&mut self, object_name: &str, config: ContactPriorConfig) {
+        let config = ContactPriorConfig {
+            start_clearance_m: self.robot.body_radius + self.config.start_gap_m,
+            ..config
+        };
+        self.prior = Some((object_name.to_owned(), config));
+    }
+
+    /// Why the latest circling gave no prior ([`ObjectTracker::start_from_prior`]), if it
+    /// gave none.
+    pub fn prior_error(&self) -> Option<&ContactPriorBuildError> {
+        self.prior_error.as_ref()
+    }
+
+    /// Builds the prior from the circling's points, if one is asked for and no gradient is
+    /// given. Allocates.
+    fn take_prior(&mut self) {
+        if self.gradient.is_some() {
+            return;
+        }
+        let Some((name, config)) = self.prior.clone() else {
+            return;
+        };
+        let Some(c) = border_centroid(&self.points) else {
+            return;
+        };
+        let border: Vec<DVec2> = self.points.iter().map(|p| *p - c).collect();
+        match agp_affordance::contact_prior(&name, &border, &config) {
+            Ok(ag) => match self.set_gradient(&ag) {
+                Ok(()) => self.prior_error = None,
+                Err(_) => {
+                    self.prior_error = Some(ContactPriorBuildError::NoFootprint {
+                        points: border.len(),
+                    });
+                }
+            },
+            Err(e) => self.prior_error = Some(e),
+        }
     }
 
     /// The gradient taken by [`ObjectTracker::set_gradient`], if any, as learned on since
@@ -511,6 +568,7 @@ impl ObjectTracker {
         if !(closed || self.points.len() >= 4 * MIN_MATCH_POINTS) {
             return;
         }
+        self.take_prior();
         if let Some(g) = self.gradient.as_mut() {
             let guess = self.valid.then_some(self.pose);
             if let Some(m) = match_pose(&mut g.matcher, &self.points, guess) {

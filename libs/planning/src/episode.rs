@@ -248,6 +248,11 @@ pub struct EpisodeConfig {
     /// instead of straight ahead. Off for a fresh world, where the robot starts facing the
     /// object and what the estimator held may be of a world gone.
     pub start_from_estimate: bool,
+    /// An object never pushed (issue 33): the affordance planner starts without a
+    /// gradient, circles the object first, and plans on the prior the estimator builds from
+    /// that circling (the world's [`World::newer_gradient`]), then on each newer set. Off:
+    /// the affordance planner needs its gradient from the start.
+    pub await_gradient: bool,
 }
 
 impl EpisodeConfig {
@@ -304,6 +309,7 @@ impl EpisodeConfig {
             stop_margin_relax: 0.02,
             trace: false,
             start_from_estimate: false,
+            await_gradient: false,
         }
     }
 }
@@ -582,6 +588,7 @@ fn brain_for<'g>(
 ) -> Result<(Brain<'g>, u32), EpisodeRunError> {
     Ok(match (planner, ag) {
         (PlannerKind::Baseline, _) => (Brain::Baseline { radius: None }, 1),
+        (_, None) if config.await_gradient => (Brain::Awaiting, 1),
         (_, None) => return Err(EpisodeRunError::NoGradient(planner)),
         (_, Some(ag)) => {
             let shape = ag.combined_shape();
@@ -621,6 +628,9 @@ enum Brain<'a> {
         long_planner: PushPlanner<'a>,
         start_radius: f64,
     },
+    /// An object never pushed: no gradient until the first circling's prior comes
+    /// ([`EpisodeConfig::await_gradient`]); it circles, and plans nothing.
+    Awaiting,
     Baseline {
         /// The object's radius (m) from the first circling: farthest border point from the
         /// estimated centroid.
@@ -830,7 +840,7 @@ impl<W: World> Episode<'_, '_, W> {
         if self.run.elapsed() > config.max_sim_time_s {
             return Some(EpisodeEnd::TimeLimit);
         }
-        if matches!(self.brain, Brain::Gradient { .. })
+        if matches!(self.brain, Brain::Gradient { .. } | Brain::Awaiting)
             && let Some(newer) = self.run.world.newer_gradient()
         {
             // Between two pushes: plan the next on the newer gradient (online learning).
@@ -1089,6 +1099,7 @@ impl<W: World> Episode<'_, '_, W> {
                     orbit: *start_radius,
                 })
             }
+            Brain::Awaiting => None,
             Brain::Baseline { radius } => {
                 let centre = est.position();
                 let to = target - centre;
@@ -1274,7 +1285,7 @@ impl<W: World> Episode<'_, '_, W> {
                 error_rad: p.sigma_theta,
                 pushes_since: est.pushes_since + 1,
             },
-            Brain::Gradient { .. } => Estimate {
+            Brain::Gradient { .. } | Brain::Awaiting => Estimate {
                 error_m: f64::INFINITY,
                 pushes_since: est.pushes_since + 1,
                 ..est
@@ -1334,6 +1345,29 @@ impl<W: World> Episode<'_, '_, W> {
             p.border_seen * 1e2
         ));
         match &mut self.brain {
+            Brain::Awaiting => {
+                // The estimator builds the prior from this circling and publishes it as a
+                // newer set; its estimates say so from the frame after (a second at most).
+                let seq = p.grids_seq;
+                let mut frames = 0;
+                while self.run.world.perceived().grids_seq == seq && frames < 640 {
+                    self.run.step(0.0, 0.0)?;
+                    frames += 1;
+                }
+                let p = *self.run.world.perceived();
+                if p.valid == 0 || p.match_seq == match_before || p.grids_seq == seq {
+                    self.trace(format_args!("the estimator built no prior"));
+                    return Ok(None);
+                }
+                self.trace(format_args!(
+                    "prior of grids seq {}: estimate ({:.1}, {:.1}) mm {:.1} deg",
+                    p.grids_seq,
+                    p.pose.x * 1e3,
+                    p.pose.y * 1e3,
+                    p.pose.theta.to_degrees()
+                ));
+                Ok(Some(Estimate::fresh(p.pose)))
+            }
             Brain::Gradient { .. } => {
                 if p.valid == 0 || p.match_seq == match_before {
                     self.trace(format_args!("the estimator found no pose"));

@@ -23,7 +23,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use agp_affordance::AffordanceGradient;
+use agp_affordance::{AffordanceGradient, ContactPriorConfig};
 use agp_perception::{
     IrView, LearnProblem, LearningConfig, ObjectTracker, OnlineLearningConfig, ProtocolLearner,
     TrackerConfig,
@@ -81,6 +81,14 @@ struct Args {
     /// so far is of a frozen gradient.
     #[arg(long, env = "AGP_LEARN_ONLINE")]
     learn_online: bool,
+    /// An object never pushed before: no AG file and no learning phase. The task's first
+    /// circling gives the gradient, the prior that the contact geometry of that circling
+    /// gives (`agp_affordance::contact_prior`: a push through the centroid translates the
+    /// object along the push, an offset one turns it by its lever arm about the border's
+    /// centroid), published as grids seq 1; the task's pushes learn on from it (needs
+    /// `--learn-online`). Nothing is saved.
+    #[arg(long, requires = "learn_online", conflicts_with_all = ["load", "reuse", "perceive_only"])]
+    from_prior: bool,
     /// Exit with an error when neither a frame nor an event arrives for this long,
     /// seconds; 0 waits until SIGTERM.
     #[arg(long, default_value_t = 0)]
@@ -132,12 +140,22 @@ fn run() -> Result<()> {
         }
         (None, false) => None,
     };
-    if load.is_none() && !args.perceive_only {
+    let learns = load.is_none() && !args.perceive_only && !args.from_prior;
+    if learns {
         // Learning ends by saving there: find out now, not after the whole protocol.
         check_ag_destination(&saved)?;
     }
-    let learns = load.is_none() && !args.perceive_only;
     let mut estimator = Estimator::open(&instance, &scenario, !learns, &args)?;
+    if args.from_prior {
+        estimator
+            .state
+            .tracker
+            .start_from_prior(&scenario.name, ContactPriorConfig::default());
+        println!(
+            "agp-estimator: `{}` was never pushed: its gradient will be the contact prior of the task's first circling, learned on from every push",
+            scenario.name
+        );
+    }
     if let Some(path) = &load {
         let gradient = AffordanceGradient::load_for(path, &scenario.name)
             .with_context(|| format!("cannot load the AG file {}", path.display()))?;
@@ -427,7 +445,15 @@ impl Estimator {
         publish_grids(&self.grids, gradient, self.grids_seq)?;
         let _ = self.grids_wake.notify();
         self.state.grids_seq = self.grids_seq;
+        let first = self.published_generation == 0;
         self.published_generation = generation;
+        if first {
+            println!(
+                "agp-estimator: built the contact prior of `{}` from the first circling: grids seq {} published",
+                self.object, self.grids_seq
+            );
+            return Ok(());
+        }
         println!(
             "agp-estimator: learned a push online ({} since the gradient was given): grids seq {} published",
             self.state.tracker.pushes_learned(),

@@ -83,6 +83,13 @@ struct Args {
     /// learns; it publishes the saved gradients when the file is there).
     #[arg(long)]
     learn_if_missing: bool,
+    /// Place, trajectory: an object never pushed before. No AG file, no learning phase:
+    /// the episode starts without a gradient, circles the object first, and plans on the
+    /// prior the estimator builds from that circling's contact geometry, then on each set
+    /// it publishes as it learns the task's pushes (run the estimator with
+    /// `--learn-online --from-prior`). Needs `--planner affordance`.
+    #[arg(long, conflicts_with = "learn_if_missing")]
+    from_prior: bool,
     /// Folder of the AG files (`<object>.ag`).
     #[arg(long, env = "AGP_RESULTS", default_value = "results")]
     results: std::path::PathBuf,
@@ -216,6 +223,14 @@ fn run() -> Result<()> {
             "`--skills` serves a push-level planner with `--mode place` or `--mode serve` and `--planner affordance`"
         );
     }
+    if args.from_prior
+        && (args.planner != PlannerKind::Affordance
+            || !matches!(args.mode, Mode::Place | Mode::Trajectory))
+    {
+        bail!(
+            "`--from-prior` places (or pushes along a path) an object never pushed before with `--planner affordance`"
+        );
+    }
     if args.check {
         return Ok(());
     }
@@ -288,6 +303,7 @@ fn run() -> Result<()> {
                 ag_file,
                 trace: args.trace,
                 skills: args.skills,
+                from_prior: args.from_prior,
             };
             if args.mode == Mode::Serve {
                 let paced = args.clock == "lockstep";

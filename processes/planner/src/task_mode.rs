@@ -56,6 +56,9 @@ pub struct TaskSettings {
     pub trace: bool,
     /// A push-level planner of another process chooses the pushes (`--skills`).
     pub skills: bool,
+    /// An object never pushed (`--from-prior`): no gradient to wait for; the first
+    /// circling's prior comes as the estimator's first set.
+    pub from_prior: bool,
 }
 
 /// The robot through the ring: one command per physics step, each frame acted on once the
@@ -241,6 +244,8 @@ pub struct Session {
     tasks: TaskPublication,
     planner: PlannerKind,
     trace: bool,
+    /// The episode starts without a gradient and waits for the first circling's prior.
+    from_prior: bool,
 }
 
 impl Session {
@@ -261,7 +266,14 @@ impl Session {
         }
         let robot = RobotDescription::epuck();
         let mut grids = None;
-        let gradient = if settings.planner.needs_gradient() {
+        let gradient = if settings.from_prior {
+            grids = Some(GridLink::open(instance).context("cannot open the gradient grids")?);
+            println!(
+                "planner: `{}` was never pushed: circling it first for the estimator's prior",
+                scenario.name
+            );
+            None
+        } else if settings.planner.needs_gradient() {
             let link =
                 grids.insert(GridLink::open(instance).context("cannot open the gradient grids")?);
             match link.wait_gradient(&scenario.name, settings.gradient_timeout, &settings.ag_file) {
@@ -349,6 +361,7 @@ impl Session {
             tasks,
             planner: settings.planner,
             trace: settings.trace,
+            from_prior: settings.from_prior,
         }))
     }
 
@@ -382,6 +395,7 @@ impl Session {
         self.tasks.send(scenario, task)?;
         let mut config = EpisodeConfig {
             trace: self.trace,
+            await_gradient: self.from_prior && self.gradient.is_none(),
             ..EpisodeConfig::for_task(&scenario.task)
         };
         let planner = self.planner;

@@ -192,6 +192,13 @@ enum BenchCmd {
     ///
     /// Example: agp bench adapt --scenario triangle --friction 0.25 --json adapt.json
     Adapt(bench_adapt::BenchAdaptArgs),
+    /// Place an object never pushed before (issue 33): no learning phase, no AG file; each
+    /// episode's estimator builds the gradient from the contact prior of its first
+    /// circling and learns on from the episode's own pushes. The goals are `agp bench
+    /// place`'s, so `agp bench place --planners affordance` (learn first) stands beside it.
+    ///
+    /// Example: agp bench online --scenario libs/world/scenarios/pentagon.toml --json online.json
+    Online(agp_harness::bench_online::BenchOnlineArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -254,6 +261,9 @@ fn main() -> ExitCode {
         Cmd::Bench {
             what: BenchCmd::Adapt(args),
         } => agp_harness::stop::guarded(|| bench_adapt::run(args)),
+        Cmd::Bench {
+            what: BenchCmd::Online(args),
+        } => agp_harness::stop::guarded(|| agp_harness::bench_online::run(args)),
         Cmd::Probe {
             what: ProbeCmd::Push(args),
         } => probe::run(args).map(|r| match r {

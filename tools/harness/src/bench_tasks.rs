@@ -135,8 +135,19 @@ impl<'a> Runner<'a> {
         planner: PlannerKind,
         seed: u64,
         tag: &str,
+        online: bool,
     ) -> Result<Self> {
         let ag = ag.filter(|_| planner.needs_gradient());
+        if online {
+            if in_process {
+                bail!("an object never pushed (`agp bench online`) runs over the pipeline only");
+            }
+            return Ok(Self::Pipeline(PipelineBench::start_online(
+                scenario_arg,
+                seed,
+                tag,
+            )?));
+        }
         if in_process {
             let ag = ag
                 .map(|p| {
@@ -210,6 +221,9 @@ pub(crate) struct EpisodePlan<'a> {
     pub ag: Option<&'a Path>,
     /// Whether several seeds run side by side (each pipeline's tag then holds its seed).
     pub several_seeds: bool,
+    /// An object never pushed: each episode's estimator starts from nothing and the
+    /// affordance planner plans on its contact prior ([`PipelineBench::start_online`]).
+    pub online: bool,
     pub bar: &'a ProgressBar,
 }
 
@@ -275,6 +289,7 @@ pub(crate) fn run_episodes(
             planner,
             seed,
             &tag,
+            plan.online,
         ) {
             Ok(r) => r,
             Err(_) if stop::requested() => {
@@ -382,6 +397,14 @@ pub(crate) fn progress(total: u64) -> ProgressBar {
 /// seed its own goals, each (seed, planner) its own freshly seeded pipeline side by side on
 /// the cores; the one-seed documents merged by [`merge`] into the result.
 pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
+    run_place_learning(args, false)
+}
+
+/// `agp bench place`, or with `online` `agp bench online` (issue 33): the same goals per
+/// seed, each episode's estimator starting from nothing (no AG file) and the affordance
+/// planner placing the object on the gradient it learns from the episode's own pushes.
+/// The JSON says `"learn": "online"`.
+pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<Value> {
     let wall = Instant::now();
     if args.episodes == 0 {
         bail!("`--episodes` must be at least 1");
@@ -391,12 +414,16 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
     }
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
-    let ag = resolve_ag(
-        args.ag.as_deref(),
-        &args.scenario,
-        &scenario,
-        &args.planners,
-    )?;
+    let ag = if online {
+        None
+    } else {
+        resolve_ag(
+            args.ag.as_deref(),
+            &args.scenario,
+            &scenario,
+            &args.planners,
+        )?
+    };
     // From here on the episode loops poll the stop flag.
     let _checked = stop::checked();
     let note = physics_note(args.in_process);
@@ -430,6 +457,7 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
         scenario: &scenario,
         ag: ag.as_deref(),
         several_seeds: seeds.len() > 1,
+        online,
         bar: &bar,
     };
     let tolerance = (base.tolerance_m * 1e3, base.tolerance_rad.to_degrees());
@@ -525,6 +553,9 @@ pub fn run_place(args: &BenchPlaceArgs) -> Result<Value> {
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);
+    if online {
+        doc["learn"] = json!("online");
+    }
     print_place(&doc, note);
     println!("wall time {wall_time_s:.1} s");
     if let Some(path) = &args.json {

@@ -387,6 +387,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         scenario: &scenario,
         ag: ag.as_deref(),
         several_seeds: seeds.len() > 1,
+        online: false,
         bar: &bar,
     };
     let planned = paths.len() * work.len();

@@ -14,6 +14,7 @@
 pub mod bench_adapt;
 pub mod bench_learn;
 pub mod bench_merge;
+pub mod bench_online;
 pub mod bench_paper;
 pub mod bench_tasks;
 pub mod bench_trajectory;

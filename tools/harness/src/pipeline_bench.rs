@@ -38,6 +38,10 @@ pub struct PipelineBench {
     _node: Node<AgpIpc>,
     logs: tempfile::TempDir,
     episodes: u32,
+    /// An object never pushed: the estimator starts each episode from nothing
+    /// (`--learn-online --from-prior`, restarted before each episode but the first) and the
+    /// affordance planner plans on its prior (`--from-prior`).
+    online: bool,
     /// Ground-truth samples the evaluation missed (its buffer overflowed), all episodes.
     pub truth_gaps: u64,
 }
@@ -47,6 +51,44 @@ impl PipelineBench {
     /// given, under the instance `bench-<pid>-<tag>` (`tag`: lowercase letters, digits,
     /// `-`, `_`; one per pipeline running at once).
     pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64, tag: &str) -> Result<Self> {
+        Self::launch(scenario_arg, ag, false, seed, tag)
+    }
+
+    /// As [`PipelineBench::start`], for an object never pushed before: no AG file; each
+    /// episode starts with a fresh estimator that builds its gradient from the contact
+    /// prior of the episode's first circling and learns on from the episode's pushes
+    /// (issue 33), and the affordance planner plans on what it publishes.
+    pub fn start_online(scenario_arg: &str, seed: u64, tag: &str) -> Result<Self> {
+        Self::launch(scenario_arg, None, true, seed, tag)
+    }
+
+    /// The estimator of this pipeline: serving `ag`, learning online from the prior, or
+    /// perceiving only.
+    fn spawn_estimator(
+        name: &str,
+        scenario_arg: &str,
+        ag: Option<&Path>,
+        online: bool,
+    ) -> Result<GuardedChild> {
+        let mut cmd = Command::new(sibling_executable("agp-estimator")?);
+        cmd.args(["--instance", name, "--scenario", scenario_arg])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        match ag {
+            _ if online => cmd.args(["--learn-online", "--from-prior"]),
+            Some(path) => cmd.arg("--load").arg(path),
+            None => cmd.arg("--perceive-only"),
+        };
+        GuardedChild::spawn("agp-estimator", &mut cmd)
+    }
+
+    fn launch(
+        scenario_arg: &str,
+        ag: Option<&Path>,
+        online: bool,
+        seed: u64,
+        tag: &str,
+    ) -> Result<Self> {
         let scenario = Scenario::resolve(scenario_arg)?;
         let name = format!("bench-{}-{tag}", std::process::id());
         let instance = Instance::new(&name).map_err(|e| anyhow!("instance `{name}`: {e}"))?;
@@ -63,15 +105,7 @@ impl PipelineBench {
             .stdout(Stdio::null());
         let physics = GuardedChild::spawn("agp-physics", &mut cmd)?;
         // The estimator perceives for every planner; with `ag` it also serves its gradients.
-        let mut cmd = Command::new(sibling_executable("agp-estimator")?);
-        cmd.args(["--instance", &name, "--scenario", scenario_arg])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null());
-        match ag {
-            Some(path) => cmd.arg("--load").arg(path),
-            None => cmd.arg("--perceive-only"),
-        };
-        let estimator = Some(GuardedChild::spawn("agp-estimator", &mut cmd)?);
+        let estimator = Some(Self::spawn_estimator(&name, scenario_arg, ag, online)?);
         let driver = match LockstepDriver::connect(
             &instance,
             "bench",
@@ -101,6 +135,7 @@ impl PipelineBench {
             _node: node,
             logs,
             episodes: 0,
+            online,
             truth_gaps: 0,
         })
     }
@@ -123,6 +158,18 @@ impl PipelineBench {
             Err(DriveError::Shutdown) => bail!("interrupted"),
             Err(e) => return Err(e).context("cannot reset the bench's physics"),
         }
+        if self.online && self.episodes > 1 {
+            // Never pushed before: what the last episode's estimator learned goes with it.
+            if let Some(e) = &mut self.estimator {
+                e.stop(Duration::from_secs(5))?;
+            }
+            self.estimator = Some(Self::spawn_estimator(
+                self.instance.name(),
+                &self.scenario_arg,
+                None,
+                true,
+            )?);
+        }
         // The episode starts from the reset: only its samples count.
         self.truth.restart()?;
         self.estimates.restart();
@@ -139,6 +186,11 @@ impl PipelineBench {
         cmd.args(["--instance", self.instance.name()])
             .args(["--scenario", &self.scenario_arg])
             .args(["--clock", "lockstep", "--planner", planner.name()])
+            .args(
+                (self.online && planner == PlannerKind::Affordance)
+                    .then_some("--from-prior")
+                    .as_slice(),
+            )
             .arg("--report")
             .arg(&report)
             .stdin(Stdio::null())
