@@ -9,8 +9,8 @@ use agp_runtime::{
     shutdown_requested,
 };
 use agp_shared_types::{
-    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, Reset, SessionKey, TimingHeader, monotonic_ns,
-    stage,
+    ActiveEpoch, GroundTruth, IrFrame, MotorCommand, ObjectEstimate, Reset, SessionKey,
+    TimingHeader, monotonic_ns, stage,
 };
 use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
@@ -65,6 +65,12 @@ struct Args {
     /// proof that a hot swap lost and repeated no step).
     #[arg(long)]
     step_log: Option<std::path::PathBuf>,
+    /// Lockstep: apply each motor command for this many steps (1 to 64), publishing every
+    /// frame and stepping on only once the estimator's estimate of the frame two before is
+    /// in, so the estimator takes in every frame, in order, without a command round trip
+    /// per step. A command answers every N-th frame. Needs an estimator on the instance.
+    #[arg(long, default_value_t = 1)]
+    hold_steps: u32,
 }
 
 /// Counts heap allocations by region when `AGP_COUNT_ALLOCS=1` (see
@@ -89,6 +95,15 @@ fn run() -> Result<()> {
             args.rate_hz
         );
     }
+    if !(1..=MAX_HOLD_STEPS).contains(&args.hold_steps) {
+        bail!(
+            "--hold-steps must be between 1 and {MAX_HOLD_STEPS}, got {}",
+            args.hold_steps
+        );
+    }
+    if args.hold_steps > 1 && args.clock != Clock::Lockstep {
+        bail!("--hold-steps needs the lockstep clock");
+    }
     install_shutdown_handler();
     let key = SessionKey::from_env().map_err(|e| anyhow::anyhow!(e))?;
     let scenario = Scenario::resolve(&args.scenario)?;
@@ -108,6 +123,11 @@ fn run() -> Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}"))?;
     let (ports, inbox) = Ports::open(&instance, &node)?;
     let waiter = Waiter::new(inbox, WaitStrategy::from_env());
+    let hold = if args.hold_steps > 1 {
+        Some(Hold::open(&instance, &node, args.hold_steps)?)
+    } else {
+        None
+    };
     let step_log = match &args.step_log {
         Some(path) => Some(StepLog::open(path)?),
         None => None,
@@ -122,6 +142,7 @@ fn run() -> Result<()> {
         trace_base: monotonic_ns(),
         rate_hz: args.rate_hz,
         step_log,
+        hold,
     };
     let result = match args.clock {
         Clock::Lockstep => runner.lockstep(&waiter, args.idle_timeout_s),
@@ -370,7 +391,81 @@ struct Runner {
     trace_base: u64,
     rate_hz: f64,
     step_log: Option<StepLog>,
+    /// `--hold-steps` above 1: each command held for that many steps, paced by the estimator.
+    hold: Option<Hold>,
 }
+
+/// The longest hold `--hold-steps` takes.
+const MAX_HOLD_STEPS: u32 = 64;
+
+/// How many frames may be published and not yet estimated during a hold: fewer than the
+/// estimator's frame buffer (4, `Qos::stream`), so it loses none.
+const HOLD_WINDOW: u64 = 3;
+
+/// A hold of each command for `steps` steps (`--hold-steps`): physics steps on while the
+/// estimator keeps up, read from the step of its newest estimate.
+struct Hold {
+    steps: u32,
+    estimates: Subscriber<AgpIpc, ObjectEstimate, ()>,
+    waiter: Waiter,
+    /// The step of the newest estimate seen (its frame's).
+    estimated: Option<u64>,
+}
+
+impl Hold {
+    fn open(instance: &Instance, node: &Node<AgpIpc>, steps: u32) -> Result<Self> {
+        let topic = instance.estimates(node)?;
+        let estimates = topic
+            .subscriber()
+            .create()
+            .map_err(port_err("estimate subscriber"))?;
+        let listener = topic
+            .event
+            .listener_builder()
+            .create()
+            .map_err(port_err("estimate listener"))?;
+        Ok(Self {
+            steps,
+            estimates,
+            waiter: Waiter::new(listener, WaitStrategy::from_env()),
+            estimated: None,
+        })
+    }
+
+    /// Until the estimate of frame `published + 1 - HOLD_WINDOW` or a later one is in:
+    /// then at most `HOLD_WINDOW - 1` frames wait for the estimator besides the one about
+    /// to be published.
+    fn pace(&mut self, published: u64) -> Result<()> {
+        let need = (published + 1).saturating_sub(HOLD_WINDOW);
+        let deadline = Instant::now() + HOLD_TIMEOUT;
+        loop {
+            let estimates = &self.estimates;
+            let estimated = &mut self.estimated;
+            let outcome = {
+                let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
+                self.waiter.wait_for(Duration::from_millis(5), || {
+                    while let Ok(Some(e)) = estimates.receive() {
+                        *estimated = Some(estimated.map_or(e.step, |s| s.max(e.step)));
+                    }
+                    estimated.is_some_and(|s| s >= need).then_some(())
+                })
+            };
+            match outcome {
+                WaitOutcome::Ready(()) => return Ok(()),
+                // The caller sees the request and stops stepping.
+                WaitOutcome::Shutdown => return Ok(()),
+                WaitOutcome::TimedOut if Instant::now() > deadline => bail!(
+                    "no estimate of step {need} within {HOLD_TIMEOUT:?} during a held command: \
+                     is agp-estimator running on this instance?"
+                ),
+                WaitOutcome::TimedOut => {}
+            }
+        }
+    }
+}
+
+/// Safety net of a held command's wait for the estimator.
+const HOLD_TIMEOUT: Duration = Duration::from_secs(60);
 
 impl Runner {
     /// Publishes the frame and ground truth of the current step. `cause` is the timing of
@@ -574,6 +669,7 @@ impl Runner {
                     let applied = monotonic_ns();
                     cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
                     self.publish(applied, cause)?;
+                    self.hold_on(l, r)?;
                     alloc_count::message_done();
                 }
             }
@@ -582,6 +678,36 @@ impl Runner {
                 self.publish(0, TimingHeader::default())?;
             }
         }
+    }
+
+    /// With `--hold-steps N`: the command just applied, `N - 1` steps more, each once the
+    /// estimator has kept up (frames without a cause of their own).
+    fn hold_on(&mut self, l: f64, r: f64) -> Result<()> {
+        let Some(mut hold) = self.hold.take() else {
+            return Ok(());
+        };
+        let result = self.held_steps(&mut hold, l, r);
+        self.hold = Some(hold);
+        result
+    }
+
+    /// The steps of a hold after its first, each paced by the estimator.
+    fn held_steps(&mut self, hold: &mut Hold, l: f64, r: f64) -> Result<()> {
+        for _ in 1..hold.steps {
+            hold.pace(self.sim.step_count())?;
+            if shutdown_requested() {
+                return Ok(());
+            }
+            if let Some(log) = &mut self.step_log {
+                log.record(self.sim.step_count(), self.active_epoch)?;
+            }
+            {
+                let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
+                self.sim.step(l, r);
+            }
+            self.publish(monotonic_ns(), TimingHeader::default())?;
+        }
+        Ok(())
     }
 
     /// Hands history to subscribers that connected since the last send.
