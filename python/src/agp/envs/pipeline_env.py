@@ -480,19 +480,20 @@ class AgpEnv(gym.Env):
         gx, gy, gth = self._target(ox, oy)
         c, s = math.cos(math.radians(oth)), math.sin(math.radians(oth))
         dx, dy = gx - ox, gy - oy
-        goal = (c * dx + s * dy, -s * dx + c * dy, _wrap_deg(gth - oth))
 
-        def pose(p):
-            return np.array([np.clip(p[0], -b, b), np.clip(p[1], -b, b), _wrap_deg(p[2])], dtype=np.float32)
+        def pose(x, y, th):
+            return np.array((min(max(x, -b), b), min(max(y, -b), b), _wrap_deg(th)), dtype=np.float32)
 
-        sig = np.array([min(sigma[0], SIGMA_CAP[0]), min(sigma[1], SIGMA_CAP[1])], dtype=np.float32)
+        sig_mm = sigma[0] if sigma[0] == sigma[0] else SIGMA_CAP[0]  # NaN: unknown
+        sig_deg = sigma[1] if sigma[1] == sigma[1] else SIGMA_CAP[1]
         return {
-            "robot": pose(robot),
-            "object": pose((ox, oy, oth)),
+            "robot": pose(*robot),
+            "object": pose(ox, oy, oth),
             "object_valid": int(valid),
-            "sigma": np.nan_to_num(sig, nan=SIGMA_CAP[0], posinf=SIGMA_CAP[0]).clip(0.0, np.array(SIGMA_CAP, np.float32)),
-            "goal": pose(goal),
-            "ir": np.clip(np.array(ir, dtype=np.float32), 0.0, 4095.0),
+            "sigma": np.array((min(max(sig_mm, 0.0), SIGMA_CAP[0]), min(max(sig_deg, 0.0), SIGMA_CAP[1])), dtype=np.float32),
+            "goal": pose(c * dx + s * dy, -s * dx + c * dy, gth - oth),
+            # Physics clamps the readings to 0..4095.
+            "ir": np.array(ir, dtype=np.float32),
         }
 
     def _frame_obs(self) -> dict:
@@ -505,7 +506,7 @@ class AgpEnv(gym.Env):
             (e.pose.x * 1e3, e.pose.y * 1e3, math.degrees(e.pose.theta)),
             valid,
             (e.sigma_xy * 1e3, math.degrees(e.sigma_theta)) if valid else SIGMA_CAP,
-            list(f.ir_raw),
+            f.ir_raw,
         )
 
     def _request_obs(self) -> dict:
@@ -516,7 +517,7 @@ class AgpEnv(gym.Env):
             (q.object.x * 1e3, q.object.y * 1e3, math.degrees(q.object.theta)),
             True,
             (q.sigma_xy * 1e3, math.degrees(q.sigma_theta)),
-            list(self._ring.frame.ir_raw),
+            self._ring.frame.ir_raw,
         )
 
     # -- episodes -------------------------------------------------------------------------------
