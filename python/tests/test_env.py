@@ -35,12 +35,12 @@ def name(tag: str) -> str:
     return f"te{tag}-{os.getpid() % 100000}"
 
 
-# Both environments and both action levels, in two runs (CI's time: each push-level reset
-# starts a pipeline and the executor's first circling). The other two pairs pass as well
-# (`AGP_TEST_ALL_CHECKS=1` runs all four).
-PAIRS = [("agp/Place-v0", "push"), ("agp/Trajectory-v0", "wheels")]
+# CI checks one pair for its time budget (a push-level check is about 8 resets, each a
+# pipeline started and the executor's first circling: 23 s in debug under load);
+# `AGP_TEST_ALL_CHECKS=1` checks both environments at both action levels.
+PAIRS = [("agp/Trajectory-v0", "wheels")]
 if os.environ.get("AGP_TEST_ALL_CHECKS") == "1":
-    PAIRS += [("agp/Place-v0", "wheels"), ("agp/Trajectory-v0", "push")]
+    PAIRS += [("agp/Place-v0", "wheels"), ("agp/Place-v0", "push"), ("agp/Trajectory-v0", "push")]
 
 
 @pytest.mark.parametrize("env_id,control", PAIRS)
