@@ -145,8 +145,17 @@ fn sources(dir: &str) -> Vec<(PathBuf, String)> {
 fn the_estimator_and_the_planners_code_never_reads_the_objects_truth_from_the_scenario() {
     // The object's spec (polygon, size, pose, mass, friction) is ground truth: the
     // estimator and the planner get a `ScenarioBrief` (and the learning protocol's
-    // experimenter an `Experimenter`), never the `ObjectSpec`.
+    // experimenter an `Experimenter`), never the `ObjectSpec`. One file is the exception,
+    // by design: the `model` planner's pushing model of the true object
+    // (`PushModel::from_scenario`), a ground-truth reader that says so in its doc (checked
+    // here) and in every report, as the `oracle` does.
     let forbidden = [".object.", "object.shape", "ObjectShape", "ObjectSpec"];
+    let model_door = std::path::Path::new("libs/planning/src/push_model.rs");
+    let door = std::fs::read_to_string(workspace_root().join(model_door)).expect("push_model.rs");
+    assert!(
+        door.contains("reads\n//! ground truth by design"),
+        "push_model.rs no longer says it reads ground truth"
+    );
     let mut found = Vec::new();
     for dir in [
         "processes/estimator/src",
@@ -155,6 +164,9 @@ fn the_estimator_and_the_planners_code_never_reads_the_objects_truth_from_the_sc
         "libs/planning/src",
     ] {
         for (path, text) in sources(dir) {
+            if path.ends_with(model_door) {
+                continue;
+            }
             for (n, line) in text.lines().enumerate() {
                 if line.trim_start().starts_with("//") {
                     continue;

@@ -1,6 +1,8 @@
 //! Who reads ground truth, asked of iceoryx2 itself while a placement runs over the whole
-//! pipeline: the supervisor's judge, and the planner only when it is the `oracle`. The
-//! estimator and the `affordance` and `baseline` planners never subscribe to it.
+//! pipeline: the supervisor's judge, and the planner only when it is the `oracle` or the
+//! `model` (which also reads the object's shape, mass and frictions from the scenario, for
+//! its pushing model). The estimator and the `affordance` and `baseline` planners never
+//! subscribe to it.
 
 use std::collections::BTreeSet;
 use std::time::Duration;
@@ -98,4 +100,9 @@ fn only_the_judge_reads_ground_truth_while_the_affordance_planner_places_the_obj
 #[test]
 fn the_oracle_planner_reads_ground_truth_and_the_estimator_still_does_not() {
     check("oracle", &["agp-judge", "planner"]);
+}
+
+#[test]
+fn the_model_planner_reads_ground_truth_and_the_estimator_still_does_not() {
+    check("model", &["agp-judge", "planner"]);
 }

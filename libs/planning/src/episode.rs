@@ -1,6 +1,7 @@
 //! One episode of a task against an in-process [`Sim`]: the paper's Algorithm 5
 //! (benchPusher) for the `affordance` and `oracle` planners, and the centroid-pushing
-//! `baseline`.
+//! `baseline`; the `model` planner runs the affordance planner's search on a quasi-static
+//! pushing model of the true object instead of the gradient (`push_model.rs`).
 //!
 //! ```text
 //! findObj; e <- EstimatePose            (approach, circle by the side IR, match S)
@@ -26,9 +27,9 @@
 //! ends) with [`World::tell`]. The circling routine steers by the side IR itself: that is
 //! driving, not perceiving.
 //!
-//! Only the recorded true poses (for the judge), the development trace and the `oracle`
-//! read ground truth: the `affordance` and `baseline` planners see the estimator's
-//! estimates and the IR readings, nothing else.
+//! Only the recorded true poses (for the judge), the development trace, the `oracle` and
+//! the `model` read ground truth: the `affordance` and `baseline` planners see the
+//! estimator's estimates and the IR readings, nothing else.
 
 use agp_shared_types::angle;
 use std::ops::ControlFlow;
@@ -46,6 +47,7 @@ use crate::{
     PushPlanner, PushRoutine, PushSettings, TravelPhase, TravelRoutine, TravelSettings, World,
     WorldStepError, orbit_waypoints_into, symmetric_angle_error,
 };
+use crate::push_model::{PushModel, learned_push_travel_m};
 use crate::{ExternalPush, PushQuery, aim_point_at, learned_push_length_m};
 
 /// Which planner runs an episode.
@@ -57,13 +59,19 @@ pub enum PlannerKind {
     /// the circled border (IR only), moved by the robot's own travel while it pushes.
     Baseline,
     /// The affordance planner fed the object's true pose before every push: an upper
-    /// bound, and the only planner that reads ground truth.
+    /// bound, reading ground truth.
     Oracle,
+    /// The classical method beside ours: the affordance planner's push search on a
+    /// quasi-static pushing model with an ellipsoidal limit surface (Lynch; Goyal, Ruina
+    /// and Papadopoulos) of the true object (shape, mass, frictions) instead of the
+    /// gradient, fed the object's true pose before every push as the oracle is. It reads
+    /// ground truth and says so.
+    Model,
 }
 
 impl PlannerKind {
     /// All planners, in report order.
-    pub const ALL: [Self; 3] = [Self::Affordance, Self::Baseline, Self::Oracle];
+    pub const ALL: [Self; 4] = [Self::Affordance, Self::Baseline, Self::Oracle, Self::Model];
 
     /// The name used on the command line and in reports.
     pub fn name(self) -> &'static str {
@@ -71,17 +79,19 @@ impl PlannerKind {
             Self::Affordance => "affordance",
             Self::Baseline => "baseline",
             Self::Oracle => "oracle",
+            Self::Model => "model",
         }
     }
 
-    /// Whether the planner reads ground truth (only the oracle).
+    /// Whether the planner reads ground truth (the oracle and the model).
     pub fn reads_ground_truth(self) -> bool {
-        self == Self::Oracle
+        matches!(self, Self::Oracle | Self::Model)
     }
 
-    /// Whether the planner needs an affordance gradient.
+    /// Whether the planner needs an affordance gradient (the model needs the true object,
+    /// [`EpisodeConfig::model`], instead).
     pub fn needs_gradient(self) -> bool {
-        self != Self::Baseline
+        matches!(self, Self::Affordance | Self::Oracle)
     }
 }
 
@@ -91,9 +101,9 @@ impl std::fmt::Display for PlannerKind {
     }
 }
 
-/// A planner name that is none of `affordance`, `baseline`, `oracle`.
+/// A planner name that is none of `affordance`, `baseline`, `oracle`, `model`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown planner `{0}` (planners: affordance, baseline, oracle)")]
+#[error("unknown planner `{0}` (planners: affordance, baseline, oracle, model)")]
 pub struct PlannerParseError(pub String);
 
 impl std::str::FromStr for PlannerKind {
@@ -196,6 +206,10 @@ pub struct EpisodeConfig {
     pub max_sim_time_s: f64,
     /// Seed of the simulator's sensor noise.
     pub seed: u64,
+    /// The `model` planner's pushing model of the true object (ground truth: its shape,
+    /// mass and frictions, [`PushModel::from_scenario`]); nobody else reads it. `None`
+    /// by default: the `model` planner then cannot run.
+    pub model: Option<std::sync::Arc<PushModel>>,
     /// Overrides of the push choice's defaults ([`PushChoiceSettings::new`]): risk
     /// aversion, the turn penalty when only the position matters, the push lengths tried.
     pub spread_weight: f64,
@@ -284,6 +298,7 @@ impl EpisodeConfig {
             record_every_steps: 32,
             max_sim_time_s: 3000.0,
             seed: task.seed,
+            model: None,
             spread_weight: 1.0,
             // Trajectory only (Goal::Reach and the path search): tuned on seeds 1-10, where
             // 0.03 left the straight line at 0.9 of the baseline and 0.1 the S-curve.
@@ -452,6 +467,10 @@ pub enum EpisodeRunError {
     /// The affordance and oracle planners need an affordance gradient.
     #[error("planner `{0}` needs an affordance gradient")]
     NoGradient(PlannerKind),
+    /// The model planner needs its pushing model of the true object
+    /// ([`EpisodeConfig::model`]).
+    #[error("planner `model` needs the object's true shape, mass and frictions")]
+    NoModel,
     /// The trajectory has fewer than two points.
     #[error("a trajectory needs at least two points")]
     ShortPath,
@@ -588,6 +607,7 @@ fn brain_for<'g>(
 ) -> Result<(Brain<'g>, u32), EpisodeRunError> {
     Ok(match (planner, ag) {
         (PlannerKind::Baseline, _) => (Brain::Baseline { radius: None }, 1),
+        (PlannerKind::Model, _) => model_brain(robot, config)?,
         (_, None) if config.await_gradient => (Brain::Awaiting, 1),
         (_, None) => return Err(EpisodeRunError::NoGradient(planner)),
         (_, Some(ag)) => {
@@ -614,6 +634,40 @@ fn brain_for<'g>(
             )
         }
     })
+}
+
+/// The `model` planner's brain: the affordance planner's search ([`PushPlanner`]) on
+/// the predictions of the pushing model of the true object, pushes started from the circle
+/// round its true border (as the gradient's from the learned one), and its true symmetry.
+fn model_brain(
+    robot: &RobotDescription,
+    config: &EpisodeConfig,
+) -> Result<(Brain<'static>, u32), EpisodeRunError> {
+    let model = config.model.as_deref().ok_or(EpisodeRunError::NoModel)?;
+    let order = model.object().symmetry_order;
+    let r = model.object().footprint.radius() + robot.body_radius + config.start_gap_m;
+    let choice = PushChoiceSettings {
+        spread_weight: config.spread_weight,
+        reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
+        push_fractions: config.push_fractions.clone(),
+        alpha_step_deg: config.alpha_step_deg,
+        ..PushChoiceSettings::new(order, r)
+    };
+    let travel = learned_push_travel_m(
+        config.push.push_speed,
+        config.push.push_duration,
+        choice.fraction_offset,
+    );
+    let planner = model.push_planner(choice, travel);
+    let long_planner = planner.with_push_fractions(vec![1.0]);
+    Ok((
+        Brain::Gradient {
+            planner,
+            long_planner,
+            start_radius: r,
+        },
+        order,
+    ))
 }
 
 /// What a planner decides with.
@@ -959,9 +1013,10 @@ impl<W: World> Episode<'_, '_, W> {
     fn oracle_truth(&self) -> Result<Pose2, WorldStepError> {
         debug_assert!(self.planner.reads_ground_truth());
         let p = self.run.world.object_truth().ok_or_else(|| {
-            WorldStepError::Link(
-                "the oracle needs the object's true pose, which this world does not offer".into(),
-            )
+            WorldStepError::Link(format!(
+                "planner `{}` needs the object's true pose, which this world does not offer",
+                self.planner
+            ))
         })?;
         Ok(p)
     }
@@ -1176,19 +1231,16 @@ impl<W: World> Episode<'_, '_, W> {
             return None;
         };
         let c = self.run.config;
-        let contact = aim_point_at(planner.predictor().shape(), contact_deg.to_radians())?;
+        let contact = aim_point_at(planner.predictor()?.shape(), contact_deg.to_radians())?;
         let learned = learned_push_length_m(c.push.push_speed, c.push.push_duration);
         let f = (length_m / learned).clamp(0.05, 2.0);
         let k = planner.settings().fraction_offset;
         let s_scale = (f + k) / (1.0 + k);
-        let prediction = planner
-            .predictor()
-            .predict(contact, alpha_deg)
-            .map(|p| Prediction {
-                displacement: p.displacement * s_scale,
-                rotation_rad: p.rotation_rad * s_scale,
-                ..p
-            });
+        let prediction = planner.predict(contact, alpha_deg).map(|p| Prediction {
+            displacement: p.displacement * s_scale,
+            rotation_rad: p.rotation_rad * s_scale,
+            ..p
+        });
         let (s, h) = crate::approach_start(contact, alpha_deg, *start_radius)?;
         let rot = DVec2::from_angle(est.pose.theta);
         let sw = est.position() + rot.rotate(s);
@@ -1232,7 +1284,7 @@ impl<W: World> Episode<'_, '_, W> {
             if agp_shared_types::angle::wrap_angle(push_dir - want).abs() > max_deg.to_radians() {
                 continue;
             }
-            let Some(p) = planner.predictor().predict(contact, 0.0) else {
+            let Some(p) = planner.predict(contact, 0.0) else {
                 continue;
             };
             if p.confidence < planner.settings().min_confidence || p.displacement.length() < 1e-3 {

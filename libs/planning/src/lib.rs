@@ -4,7 +4,9 @@ mod circle_routine;
 mod episode;
 mod estimate_log;
 mod learning_protocol;
+mod limit_surface;
 mod push_choice;
+mod push_model;
 mod push_routine;
 mod push_service;
 mod travel;
@@ -25,6 +27,8 @@ pub use push_choice::{
     Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at, path_offset,
     path_projection, symmetric_angle_error,
 };
+pub use limit_surface::{ContactMode, Footprint, GRAVITY_MPS2, LimitSurface, PointPush, Twist};
+pub use push_model::{PushModel, PushedObject, learned_push_travel_m};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use push_service::{aim_point_at, learned_push_length_m};
 pub use travel::{

@@ -106,10 +106,12 @@ pub struct PushPlan {
     pub start: Pose2,
 }
 
-/// Chooses pushes for one object from its affordance gradient.
+/// Chooses pushes for one object from its affordance gradient (or, for the `model`
+/// planner, from a table of predictions made otherwise: [`PushPlanner::from_predictions`]).
 #[derive(Debug, Clone)]
 pub struct PushPlanner<'a> {
-    predictor: PushPredictor<'a>,
+    /// The gradient's predictor; `None` for a planner on a table of predictions.
+    predictor: Option<PushPredictor<'a>>,
     settings: PushChoiceSettings,
     contacts: Vec<DVec2>,
     alphas: Vec<f64>,
@@ -147,7 +149,7 @@ impl<'a> PushPlanner<'a> {
             .map(|(c, a)| predictor.predict(c, a))
             .collect();
         Self {
-            predictor,
+            predictor: Some(predictor),
             settings,
             contacts,
             alphas,
@@ -157,9 +159,50 @@ impl<'a> PushPlanner<'a> {
     }
 
     /// What the search predicts pushes with: pushes from the start circle, interpolated
-    /// between learned alphas along each start (see [`PushPredictor`]).
-    pub fn predictor(&self) -> &PushPredictor<'a> {
-        &self.predictor
+    /// between learned alphas along each start (see [`PushPredictor`]); `None` for a
+    /// planner on a table of predictions ([`PushPlanner::from_predictions`]).
+    pub fn predictor(&self) -> Option<&PushPredictor<'a>> {
+        self.predictor.as_ref()
+    }
+
+    /// The same search on predictions made otherwise (the `model` planner's): `predictions`
+    /// holds the full-length prediction of every (contact, alpha) pair, contact-major, as
+    /// [`PushPlanner::new`] makes them from a gradient.
+    #[track_caller]
+    pub fn from_predictions(
+        contacts: Vec<DVec2>,
+        alphas: Vec<f64>,
+        predictions: Vec<Option<Prediction>>,
+        settings: PushChoiceSettings,
+    ) -> PushPlanner<'static> {
+        assert_eq!(
+            predictions.len(),
+            contacts.len() * alphas.len(),
+            "one prediction per (contact, alpha)"
+        );
+        let radius = contacts.iter().map(|c| c.length()).fold(0.0, f64::max);
+        PushPlanner {
+            predictor: None,
+            settings,
+            contacts,
+            alphas,
+            predictions,
+            radius,
+        }
+    }
+
+    /// The full-length prediction of the push at `contact` (object frame) and `alpha_deg`:
+    /// the gradient's predictor's, or the table's entry for that exact pair.
+    pub fn predict(&self, contact: DVec2, alpha_deg: f64) -> Option<Prediction> {
+        if let Some(p) = &self.predictor {
+            return p.predict(contact, alpha_deg);
+        }
+        let i = self.contacts.iter().position(|c| *c == contact)?;
+        let j = self.alphas.iter().position(|a| *a == alpha_deg)?;
+        self.predictions
+            .get(i * self.alphas.len() + j)
+            .copied()
+            .flatten()
     }
 
     /// The same planner trying only these push lengths (fractions of the learned push):

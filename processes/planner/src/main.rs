@@ -64,7 +64,8 @@ struct Args {
     /// Learn: trials per alpha, evenly spread round the object (60: one every 6 deg).
     #[arg(long, default_value_t = 60)]
     trials_per_alpha: u32,
-    /// Place, trajectory: which planner decides (`oracle` reads the object's true pose).
+    /// Place, trajectory: which planner decides (`oracle` reads the object's true pose;
+    /// `model`, a quasi-static pushing model, its true pose, shape, mass and frictions).
     #[arg(long, default_value = "affordance")]
     planner: PlannerKind,
     /// Place: the goal, `X_MM,Y_MM,THETA_DEG` in the world frame (default: the scenario's).
@@ -239,6 +240,14 @@ fn run() -> Result<()> {
     // The planner reads the brief (the name, the robot, the task), and the experimenter's
     // knowledge for the learning protocol; nothing else of the object.
     let (scenario, experimenter) = (full.brief(), full.experimenter());
+    // The `model` planner reads the object's truth too (its shape, mass and frictions) for
+    // its pushing model, and says so; no other planner gets it.
+    let model = (args.planner == PlannerKind::Model).then(|| {
+        std::sync::Arc::new(agp_planning::PushModel::from_scenario(
+            &full,
+            &agp_world::RobotDescription::epuck(),
+        ))
+    });
     drop(full);
     let instance = Instance::new(&args.instance)
         .with_context(|| format!("bad instance name `{}`", args.instance))?;
@@ -303,6 +312,7 @@ fn run() -> Result<()> {
                 ag_file,
                 trace: args.trace,
                 skills: args.skills,
+                model,
                 from_prior: args.from_prior,
             };
             if args.mode == Mode::Serve {

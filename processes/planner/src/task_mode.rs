@@ -7,7 +7,7 @@
 //! circles again when the estimate has drifted. The gradient comes from the estimator's
 //! `grids` topic, rebuilt from the published grids (the estimator learned it, or loaded an
 //! AG file); the task goes out on the latched `task` topic, for the evaluation. Only the
-//! `oracle` reads ground truth, and says so.
+//! `oracle` and the `model` read ground truth, and say so.
 //!
 //! A hot-swapped planner (epoch > 0) takes the world as it finds it: it finds the object
 //! again and pushes on towards the same goal. So does a restarted one. The robot may then
@@ -56,6 +56,9 @@ pub struct TaskSettings {
     pub trace: bool,
     /// A push-level planner of another process chooses the pushes (`--skills`).
     pub skills: bool,
+    /// The `model` planner's pushing model of the true object (ground truth); `None` for
+    /// every other planner.
+    pub model: Option<std::sync::Arc<agp_planning::PushModel>>,
     /// An object never pushed (`--from-prior`): no gradient to wait for; the first
     /// circling's prior comes as the estimator's first set.
     pub from_prior: bool,
@@ -244,6 +247,8 @@ pub struct Session {
     tasks: TaskPublication,
     planner: PlannerKind,
     trace: bool,
+    /// The `model` planner's pushing model of the true object.
+    model: Option<std::sync::Arc<agp_planning::PushModel>>,
     /// The episode starts without a gradient and waits for the first circling's prior.
     from_prior: bool,
 }
@@ -361,6 +366,7 @@ impl Session {
             tasks,
             planner: settings.planner,
             trace: settings.trace,
+            model: settings.model.clone(),
             from_prior: settings.from_prior,
         }))
     }
@@ -395,6 +401,7 @@ impl Session {
         self.tasks.send(scenario, task)?;
         let mut config = EpisodeConfig {
             trace: self.trace,
+            model: self.model.clone(),
             await_gradient: self.from_prior && self.gradient.is_none(),
             ..EpisodeConfig::for_task(&scenario.task)
         };
@@ -405,10 +412,13 @@ impl Session {
         println!(
             "planner `{}`{}: {} of `{}`",
             planner,
-            if planner.reads_ground_truth() {
-                " (reads the object's true pose: an upper bound, not a result)"
-            } else {
-                ""
+            match planner {
+                PlannerKind::Oracle =>
+                    " (reads the object's true pose: an upper bound, not a result)",
+                PlannerKind::Model => {
+                    " (reads the object's true pose, shape, mass and frictions: the classical model, not a result)"
+                }
+                _ => "",
             },
             describe_task(task),
             scenario.name

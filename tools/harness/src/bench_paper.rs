@@ -374,10 +374,11 @@ fn print_comparison(doc: &Value, episodes: usize) {
         "trajectory ({TRAJECTORY_OBJECT}), mean distance of the centroid to the line per point:"
     );
     println!(
-        "    ours   affordance {} mm, baseline {} mm, ratio {}",
+        "    ours   affordance {} mm, baseline {} mm, ratio {}; model (GT) {} mm",
         over_seeds(t, &["planners", "affordance", "mean_error_mm"], 1.0, 2),
         over_seeds(t, &["planners", "baseline", "mean_error_mm"], 1.0, 2),
-        over_seeds(t, &["ratio"], 1.0, 2)
+        over_seeds(t, &["ratio"], 1.0, 2),
+        over_seeds(t, &["planners", "model", "mean_error_mm"], 1.0, 2),
     );
     if own.len() > 1 {
         println!("           ratio of the mean errors over the seeds {ratio:.2}");
@@ -388,9 +389,10 @@ fn print_comparison(doc: &Value, episodes: usize) {
         for (name, p) in paths {
             let r = num(p, &["ratio"]);
             println!(
-                "    {name:<10} affordance {:.2} mm, baseline {:.2} mm, ratio {r:.2}",
+                "    {name:<10} affordance {:.2} mm, baseline {:.2} mm, ratio {r:.2}; model (GT) {:.2} mm",
                 num(p, &["planners", "affordance", "mean_error_mm"]),
                 num(p, &["planners", "baseline", "mean_error_mm"]),
+                num(p, &["planners", "model", "mean_error_mm"]),
             );
             path_ratios.push((name.clone(), r));
         }
@@ -418,10 +420,10 @@ fn print_comparison(doc: &Value, episodes: usize) {
             println!(
                 "    {:<10} {:<12} {:>w$} {:>w$} {:>w$} {:>w$}",
                 object,
-                if planner.reads_ground_truth() {
-                    "oracle (GT)"
-                } else {
-                    name
+                match planner {
+                    PlannerKind::Oracle => "oracle (GT)",
+                    PlannerKind::Model => "model (GT)",
+                    _ => name,
                 },
                 over_seeds(p, &["planners", name, "success_rate"], 100.0, 0),
                 over_seeds(p, &["planners", name, "median_pushes"], 1.0, 1),
@@ -435,7 +437,10 @@ fn print_comparison(doc: &Value, episodes: usize) {
             );
         }
     }
-    println!("    (GT) the oracle reads the object's true pose: an upper bound, not a result");
+    println!("    (GT) the oracle reads the object's true pose: an upper bound, not a result;");
+    println!(
+        "         the model (a quasi-static pushing model, limit surface) reads its true pose, shape, mass and frictions"
+    );
     println!(
         "targets{}:",
         if own.len() > 1 {

@@ -37,6 +37,7 @@ const PIPELINE_NOTE: &str =
     "over the pipeline (agp-physics, agp-estimator, one agp-planner per episode, iceoryx2)";
 const IN_PROCESS_NOTE: &str = "physics in-process (agp_physics library, no iceoryx2)";
 const ORACLE_NOTE: &str = "`oracle` reads the object's true pose (ground truth): an upper bound";
+pub(crate) const MODEL_NOTE: &str = "`model` reads the object's true pose, shape, mass and frictions (ground truth): a quasi-static pushing model with an ellipsoidal limit surface, the classical method";
 
 /// The options of `agp bench place`.
 #[derive(Debug, Clone, clap::Args)]
@@ -50,11 +51,11 @@ pub struct BenchPlaceArgs {
     /// Seeds of the goals and of the sensor noise: each seed its own goals and episodes.
     #[command(flatten)]
     pub seeds: SeedArgs,
-    /// Planners to run, comma-separated: affordance, baseline, oracle.
+    /// Planners to run, comma-separated: affordance, baseline, oracle, model.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "affordance,baseline,oracle"
+        default_value = "affordance,baseline,oracle,model"
     )]
     pub planners: Vec<PlannerKind>,
     /// Affordance gradient file learned from IR (default: `results/learn/<object>.ag`,
@@ -444,6 +445,9 @@ pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<
     if planners.contains(&PlannerKind::Oracle) {
         eprintln!("{ORACLE_NOTE}");
     }
+    if planners.contains(&PlannerKind::Model) {
+        eprintln!("{MODEL_NOTE}");
+    }
     let work: Vec<(u64, PlannerKind)> = seeds
         .iter()
         .flat_map(|&seed| planners.iter().map(move |&p| (seed, p)))
@@ -816,6 +820,12 @@ pub fn print_place(doc: &Value, note: &str) {
         }
     }
     if any_oracle {
-        println!("(GT) {ORACLE_NOTE}");
+        let has = |name: &str| doc["planners"].get(name).is_some();
+        if has("oracle") {
+            println!("(GT) {ORACLE_NOTE}");
+        }
+        if has("model") {
+            println!("(GT) {MODEL_NOTE}");
+        }
     }
 }

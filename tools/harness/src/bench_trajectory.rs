@@ -1,7 +1,8 @@
 //! `agp bench trajectory`: the paper's push along a path (benchmarks.md section 2) on a set
 //! of paths (`task_goals::NamedPath`: a straight line, bends of 45 and 90 deg, an S-curve,
 //! a circle arc), the affordance and the baseline planner on each path over the seeds, the
-//! same seed for both.
+//! same seed for both, and beside them the `model` planner (a quasi-static pushing model
+//! of the true object: it reads ground truth, and the tables say so).
 //!
 //! Every figure is built from one-seed documents: a run makes one per seed and merges them
 //! with [`merge`], the function `agp bench merge` calls on the parts of a sharded run, so
@@ -29,8 +30,13 @@ use anyhow::{Context, Result, bail};
 use glam::DVec2;
 use serde_json::{Map, Value, json};
 
-/// The planners every trajectory run compares, in report order.
-const PLANNERS: [PlannerKind; 2] = [PlannerKind::Affordance, PlannerKind::Baseline];
+/// The planners every trajectory run compares, in report order (`model` reads ground
+/// truth: the classical method beside ours, see [`crate::bench_tasks::MODEL_NOTE`]).
+const PLANNERS: [PlannerKind; 3] = [
+    PlannerKind::Affordance,
+    PlannerKind::Baseline,
+    PlannerKind::Model,
+];
 
 /// The heading figure: the share of recorded points whose heading keeps to the path's
 /// tangent within this, deg.
@@ -300,19 +306,26 @@ pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
     );
     let w = if own.len() > 1 { 20 } else { 10 };
     println!(
-        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6}",
-        "path", "length", "affordance", "ends", "baseline", "ends", "ratio"
+        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6} {:>w$} {:>6}",
+        "path", "length", "affordance", "ends", "baseline", "ends", "ratio", "model (GT)", "ends"
     );
     let cell = |p: &Value| -> String {
         serde_json::from_value::<Spread>(p["spread"].clone())
             .map_or_else(|_| "-".to_owned(), |s| s.show(2))
     };
+    // The model's column, `-` in a document without it.
+    let model_ends = |p: &Value| -> String {
+        p.get("reached_end_rate")
+            .and_then(Value::as_f64)
+            .map_or_else(|| "-".to_owned(), |r| format!("{:.0}%", 100.0 * r))
+    };
     for name in order {
         let path = &doc["paths"][name];
         let a = &path["planners"]["affordance"];
         let b = &path["planners"]["baseline"];
+        let m = &path["planners"]["model"];
         println!(
-            "{:<10} {:>5.0} mm {:>w$} {:>5.0}% {:>w$} {:>5.0}% {:>6.2}",
+            "{:<10} {:>5.0} mm {:>w$} {:>5.0}% {:>w$} {:>5.0}% {:>6.2} {:>w$} {:>6}",
             name,
             number_at(path, &["length_mm"]),
             cell(a),
@@ -320,10 +333,12 @@ pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
             cell(b),
             100.0 * number_at(b, &["reached_end_rate"]),
             number_at(path, &["ratio"]),
+            cell(m),
+            model_ends(m),
         );
     }
     println!(
-        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6.2}",
+        "{:<10} {:>8} {:>w$} {:>6} {:>w$} {:>6} {:>6.2} {:>w$}",
         "overall",
         "",
         cell(&doc["planners"]["affordance"]),
@@ -331,8 +346,12 @@ pub fn print_trajectory(doc: &Value, order: &[String], note: &str) {
         cell(&doc["planners"]["baseline"]),
         "",
         number_at(doc, &["ratio"]),
+        cell(&doc["planners"]["model"]),
     );
     println!("ratio affordance / baseline (paper, one straight line: 7.82 / 10.71 = 0.73)");
+    if doc["planners"].get("model").is_some() {
+        println!("(GT) {}", crate::bench_tasks::MODEL_NOTE);
+    }
 }
 
 /// Runs `agp bench trajectory`: both planners on every chosen path over the seeds.

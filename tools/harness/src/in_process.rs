@@ -162,7 +162,8 @@ pub enum InProcessEpisodeError {
 /// Runs one episode of `task` with `planner` on `scenario` against the in-process physics
 /// library (the object and robot at the scenario's start poses, sensor noise seeded by
 /// `config.seed`), judged by its ground truth. `ag` is required by the affordance and
-/// oracle planners.
+/// oracle planners; the `model` planner gets its pushing model of the scenario's object
+/// here when `config` holds none.
 pub fn run_episode(
     scenario: &Scenario,
     robot: &RobotDescription,
@@ -180,6 +181,18 @@ pub fn run_episode(
         },
     )?;
     let mut world = InProcessWorld::new(sim, robot, ag)?;
+    let modelled;
+    let config = if planner == PlannerKind::Model && config.model.is_none() {
+        modelled = EpisodeConfig {
+            model: Some(std::sync::Arc::new(agp_planning::PushModel::from_scenario(
+                scenario, robot,
+            ))),
+            ..config.clone()
+        };
+        &modelled
+    } else {
+        config
+    };
     let result = drive_episode(&mut world, robot, ag, planner, task, config)?;
     // The judge: orientation modulo the object's true symmetry, which only it may read.
     Ok(result.judged(task, scenario.object.shape.symmetry_order(), config))

@@ -347,12 +347,15 @@ pub fn reference_plan_over(
 
 /// How far apart the costs of the pushes ours and the reference chose are, over `goals`
 /// from `estimate`: the largest `|ours - reference|`, metres (infinite when only one of
-/// the two finds a push).
+/// the two finds a push, or the planner has no gradient to predict with).
 pub fn push_cost_disagreement(planner: &PushPlanner<'_>, estimate: Pose2, goals: &[Goal]) -> f64 {
+    let Some(predictor) = planner.predictor() else {
+        return f64::INFINITY;
+    };
     let mut worst = 0.0_f64;
     for goal in goals {
         let ours: Option<PushPlan> = planner.plan(estimate, goal);
-        let theirs = reference_plan(planner.predictor(), planner.settings(), |p, f| {
+        let theirs = reference_plan(predictor, planner.settings(), |p, f| {
             planner.score(p, f, estimate, goal).2
         });
         let d = match (ours, theirs) {

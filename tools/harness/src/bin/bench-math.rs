@@ -266,6 +266,8 @@ fn bench_push_search(
     let order = scenario.object.shape.symmetry_order();
     let settings = PushChoiceSettings::new(order, start_radius_m(scenario, &robot));
     let planner = PushPlanner::new(ag, settings.clone());
+    // The reference predicts as the planner's own predictor does.
+    let predictor = agp_affordance::PushPredictor::new(ag, settings.start_radius_m);
     let goals = random_goals(16, 11);
     let estimate = Pose2::new(0.0, 0.0, 0.0);
     let worst_cost = push_cost_disagreement(&planner, estimate, &goals);
@@ -288,7 +290,7 @@ fn bench_push_search(
     let reference = measure(n.ref_warmup, n.ref_calls, allocations, || {
         k = (k + 1) % goals.len();
         let goal = &goals[k];
-        black_box(reference_plan(planner.predictor(), &settings, |p, f| {
+        black_box(reference_plan(&predictor, &settings, |p, f| {
             planner.score(p, f, estimate, goal).2
         }));
     });
@@ -297,7 +299,7 @@ fn bench_push_search(
         k = (k + 1) % goals.len();
         let goal = &goals[k];
         black_box(reference_plan_over(
-            planner.predictor(),
+            &predictor,
             &contacts,
             &settings,
             |p, f| planner.score(p, f, estimate, goal).2,
