@@ -94,8 +94,17 @@ pub struct PushPlan {
     pub alpha_deg: f64,
     /// Fraction of the learned push duration.
     pub fraction: f64,
-    /// The AG's prediction, scaled by `fraction`, in the object's frame before the push.
+    /// The AG's prediction, scaled by `fraction`, in the object's frame before the push
+    /// (along a path with its sideways part corrected, see [`PathFollowing::cross_gain`]).
     pub prediction: Prediction,
+    /// The sideways part (across the push's heading) of the prediction scaled by
+    /// `fraction` before any correction, object frame, m: `prediction.displacement` minus
+    /// `(cross_gain - 1)` times this is what the estimator predicts from the push's aim
+    /// point, alpha and scale alone. Zero for a full push and outside a path.
+    pub uncorrected_cross: DVec2,
+    /// The rotation of the prediction scaled by `fraction` before any correction (see
+    /// [`PathFollowing::turn_gain`]), rad: what the estimator predicts.
+    pub uncorrected_rotation_rad: f64,
     /// The object's predicted pose after the push, world frame.
     pub predicted: Pose2,
     /// Cost of the predicted pose plus the prediction's risk (see
@@ -121,6 +130,9 @@ pub struct PushPlanner<'a> {
     /// the tens of milliseconds of its 1,500 predictions (a realtime planner decides
     /// within a physics period).
     predictions: Vec<Option<Prediction>>,
+    /// The heading (object frame, unit) of every (contact, alpha) pair's push from the
+    /// start circle, in the order of `predictions`; `None` where no start sends it.
+    headings: Vec<Option<DVec2>>,
     radius: f64,
 }
 
@@ -148,12 +160,20 @@ impl<'a> PushPlanner<'a> {
             .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
             .map(|(c, a)| predictor.predict(c, a))
             .collect();
+        let headings = contacts
+            .iter()
+            .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
+            .map(|(c, a)| {
+                approach_start(c, a, settings.start_radius_m).map(|(_, h)| DVec2::from_angle(h))
+            })
+            .collect();
         Self {
             predictor: Some(predictor),
             settings,
             contacts,
             alphas,
             predictions,
+            headings,
             radius,
         }
     }
@@ -181,12 +201,20 @@ impl<'a> PushPlanner<'a> {
             "one prediction per (contact, alpha)"
         );
         let radius = contacts.iter().map(|c| c.length()).fold(0.0, f64::max);
+        let headings = contacts
+            .iter()
+            .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
+            .map(|(c, a)| {
+                approach_start(c, a, settings.start_radius_m).map(|(_, h)| DVec2::from_angle(h))
+            })
+            .collect();
         PushPlanner {
             predictor: None,
             settings,
             contacts,
             alphas,
             predictions,
+            headings,
             radius,
         }
     }
@@ -302,6 +330,8 @@ impl<'a> PushPlanner<'a> {
                         alpha_deg: alpha,
                         fraction: f,
                         prediction: scaled,
+                        uncorrected_cross: DVec2::ZERO,
+                        uncorrected_rotation_rad: scaled.rotation_rad,
                         predicted,
                         cost,
                         start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
@@ -340,6 +370,21 @@ pub struct PathFollowing<'p> {
     /// on it: how the planner cancels a bias of the pushes it makes, which the circlings
     /// measure (see `EpisodeConfig::cross_track_gain`).
     pub offset_m: f64,
+    /// The share of its predicted sideways motion (across the push's heading) that a push
+    /// shorter than the learned one makes: the gradient learned full pushes, and a short
+    /// push ends while the object is still mostly being pushed along the heading (the
+    /// robot's speed ramp, the contact settling), so it carries the object sideways far
+    /// less than its scaled prediction says. 1 predicts short pushes as before (the
+    /// learned push scaled); full pushes are never corrected.
+    pub cross_gain: f64,
+    /// The same for the rotation: the share of its predicted rotation that a push shorter
+    /// than the learned one makes.
+    pub turn_gain: f64,
+}
+
+/// The sideways part of `displacement` across the unit `heading`.
+fn across(displacement: DVec2, heading: DVec2) -> DVec2 {
+    displacement - displacement.dot(heading) * heading
 }
 
 /// The arc length (m) along `path` of the point of it closest to `p`, and the distance
@@ -409,9 +454,11 @@ impl PushPlanner<'_> {
         let (s0, _) = path_projection(follow.path, c0);
         let rot = DVec2::from_angle(estimate.theta);
         let mut best: Option<PushPlan> = None;
-        let predictions = self.predictions.chunks_exact(self.alphas.len().max(1));
-        for (&c, row) in self.contacts.iter().zip(predictions) {
-            for (&alpha, p) in self.alphas.iter().zip(row) {
+        let width = self.alphas.len().max(1);
+        let predictions = self.predictions.chunks_exact(width);
+        let headings = self.headings.chunks_exact(width);
+        for ((&c, row), heads) in self.contacts.iter().zip(predictions).zip(headings) {
+            for ((&alpha, p), heading) in self.alphas.iter().zip(row).zip(heads) {
                 let Some(p) = *p else {
                     continue;
                 };
@@ -420,7 +467,13 @@ impl PushPlanner<'_> {
                 }
                 for &f in follow.push_fractions {
                     let scale = (f + s.fraction_offset) / (1.0 + s.fraction_offset);
-                    let moved = rot.rotate(p.displacement * scale);
+                    // The sideways part of a short push, corrected (see `cross_gain`).
+                    let cross = match heading {
+                        Some(u) if f < 1.0 => across(p.displacement * scale, *u),
+                        _ => DVec2::ZERO,
+                    };
+                    let displacement = p.displacement * scale + (follow.cross_gain - 1.0) * cross;
+                    let moved = rot.rotate(displacement);
                     let c1 = c0 + moved;
                     let mut track = 0.0;
                     for k in 1..=4 {
@@ -429,7 +482,8 @@ impl PushPlanner<'_> {
                     }
                     let (s1, d1) = path_offset(follow.path, c1);
                     let d1 = (d1 - follow.offset_m).abs();
-                    let rotation = p.rotation_rad * scale;
+                    let turn = if f < 1.0 { follow.turn_gain } else { 1.0 };
+                    let rotation = p.rotation_rad * scale * turn;
                     let risk = s.spread_weight
                         * scale
                         * (p.displacement_spread_m + s.spread_lever_m * p.rotation_spread_rad);
@@ -456,7 +510,7 @@ impl PushPlanner<'_> {
                     };
                     let sw = c0 + rot.rotate(start);
                     let scaled = Prediction {
-                        displacement: p.displacement * scale,
+                        displacement,
                         rotation_rad: rotation,
                         ..p
                     };
@@ -465,6 +519,8 @@ impl PushPlanner<'_> {
                         alpha_deg: alpha,
                         fraction: f,
                         prediction: scaled,
+                        uncorrected_cross: cross,
+                        uncorrected_rotation_rad: p.rotation_rad * scale,
                         predicted: scaled.apply_to(estimate),
                         cost,
                         start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
@@ -560,6 +616,8 @@ mod tests {
                 heading_tolerance_rad: None,
                 heading_weight_m_per_rad: 0.0,
                 offset_m,
+                cross_gain: 1.0,
+                turn_gain: 1.0,
             };
             let plan = planner.plan_along(from, &follow).expect("a push");
             DVec2::new(plan.predicted.x, plan.predicted.y)
@@ -574,6 +632,93 @@ mod tests {
             right.y * 1e3
         );
         assert!(on.x > 0.025 && right.x > 0.025, "{on} {right}");
+    }
+
+    /// The disc of [`sliding_disc`], but every push carries it 30 mm at 30 deg to the left
+    /// of the push's heading.
+    fn drifting_disc() -> AffordanceGradient {
+        use agp_affordance::{AffordanceLearner, LearnerConfig, PushOutcome};
+        let config = LearnerConfig::default();
+        let mut learner = AffordanceLearner::new("disc", &config).expect("learner");
+        for &alpha in &config.alphas_deg {
+            for k in 0..360 {
+                let p = 0.04 * DVec2::from_angle(f64::from(k).to_radians());
+                learner.add_border_point(alpha, p).expect("border point");
+            }
+            for k in 0..120 {
+                let phi = f64::from(3 * k).to_radians();
+                let c = 0.04 * DVec2::from_angle(phi);
+                let Some((_, heading)) = approach_start(c, alpha, 0.1) else {
+                    continue;
+                };
+                let push = PushOutcome {
+                    contact_point_obj: c,
+                    displacement_obj: 0.03 * DVec2::from_angle(heading + 30f64.to_radians()),
+                    rotation_rad: 0.0,
+                    heading_obj: DVec2::from_angle(heading),
+                };
+                learner.add_push(alpha, &push).expect("push");
+            }
+        }
+        learner.into_gradient()
+    }
+
+    #[test]
+    fn a_short_path_push_is_predicted_to_drift_sideways_by_the_cross_gains_share() {
+        let ag = drifting_disc();
+        let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
+        let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
+        let plan = |cross_gain: f64, fraction: f64| {
+            let follow = PathFollowing {
+                path: &path,
+                push_fractions: &[fraction],
+                advance_m: 0.01,
+                track_weight: 3.0,
+                progress_weight: 0.5,
+                heading_tolerance_rad: None,
+                heading_weight_m_per_rad: 0.0,
+                offset_m: 0.0,
+                cross_gain,
+                turn_gain: 1.0,
+            };
+            planner
+                .plan_along(Pose2::new(0.0, 0.0, 0.0), &follow)
+                .expect("a push")
+        };
+        let k = planner.settings().fraction_offset;
+        let scale = (0.25 + k) / (1.0 + k);
+        for gain in [1.0, 0.5, 0.2] {
+            let p = plan(gain, 0.25);
+            let (_, h) = approach_start(p.contact_obj, p.alpha_deg, 0.1).expect("a start");
+            let u = DVec2::from_angle(h);
+            let d = p.prediction.displacement;
+            // Along the heading, the learned 30 mm x cos 30 deg scaled; across it, the
+            // learned 15 mm scaled and then the share asked (smoothing a uniform field
+            // keeps it within a few per cent).
+            let along = d.dot(u);
+            let side = u.perp_dot(d);
+            assert!(
+                (along - scale * 0.03 * 30f64.to_radians().cos()).abs() < 0.03 * scale * 0.03,
+                "gain {gain}: along {:.2} mm",
+                along * 1e3
+            );
+            assert!(
+                (side - gain * scale * 0.015).abs() < 0.05 * scale * 0.015,
+                "gain {gain}: across {:.2} mm",
+                side * 1e3
+            );
+            assert!(
+                (u.perp_dot(p.uncorrected_cross) - scale * 0.015).abs() < 0.05 * scale * 0.015,
+                "gain {gain}: uncorrected across {:.2} mm",
+                u.perp_dot(p.uncorrected_cross) * 1e3
+            );
+        }
+        // A full push is predicted as learned, whatever the share.
+        let full = plan(0.2, 1.0);
+        assert_eq!(full.uncorrected_cross, DVec2::ZERO);
+        let (_, h) = approach_start(full.contact_obj, full.alpha_deg, 0.1).expect("a start");
+        let side = DVec2::from_angle(h).perp_dot(full.prediction.displacement);
+        assert!((side - 0.015).abs() < 0.05 * 0.015, "{:.2} mm", side * 1e3);
     }
 
     #[test]

@@ -6,7 +6,11 @@
 //! (comma-separated names), `AGP_TRACE`, and overrides of the episode config: `LOOK` (m),
 //! `STEER` (deg, 0 off), `TRACK` (track weight), `ADV` (m), `PROG`, `FOLLOW` (0 off), `ROTW`,
 //! `SPREAD`, `FRACS`, `HEAD` and `HEADW` (heading tolerance and weight, deg), `XTG` and
-//! `XTL` (the cross-track integral's gain and leak).
+//! `XTL` (the cross-track integral's gain and leak), `XG` and `XR` (the share of their
+//! predicted sideways motion short path pushes make, and how far each circling moves it),
+//! `XT` (the share of their predicted rotation),
+//! `AGDIR` (each seed's own AG, `AGDIR/seed-<S>/lshape.ag`, as `agp bench learn --seeds`
+//! writes them, instead of AG_FILE for every seed).
 
 use agp_affordance::AffordanceGradient;
 use agp_harness::run_episode;
@@ -67,6 +71,25 @@ fn main() -> anyhow::Result<()> {
     if let Some(v) = env("XTL") {
         config.cross_track_leak = v;
     }
+    if let Some(v) = env("XG") {
+        config.path_cross_gain = v;
+    }
+    if let Some(v) = env("XR") {
+        config.path_cross_gain_rate = v;
+    }
+    if let Some(v) = env("XT") {
+        config.path_turn_gain = v;
+    }
+    let ag_dir = std::env::var_os("AGDIR").map(std::path::PathBuf::from);
+    let own_ags: Vec<(u64, AffordanceGradient)> = match &ag_dir {
+        Some(dir) => (first..first + n)
+            .map(|s| {
+                let f = dir.join(format!("seed-{s}")).join("lshape.ag");
+                Ok((s, AffordanceGradient::load(&f)?))
+            })
+            .collect::<anyhow::Result<_>>()?,
+        None => Vec::new(),
+    };
     if let Some(v) = env("PROG") {
         config.progress_weight = v;
     }
@@ -94,7 +117,11 @@ fn main() -> anyhow::Result<()> {
             path: path.clone(),
             keep_heading_rad,
         };
-        let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &cfg).ok()?;
+        let ag = own_ags
+            .iter()
+            .find(|(s, _)| *s == seed)
+            .map_or(&ag, |(_, g)| g);
+        let r = run_episode(&scenario, &robot, Some(ag), planner, &task, &cfg).ok()?;
         let e = r.evaluation?;
         let poses: Vec<_> = e.samples.iter().map(|s| s.pose).collect();
         let err = agp_harness::trajectory_error(&path, &poses)? * 1e3;
@@ -112,7 +139,7 @@ fn main() -> anyhow::Result<()> {
             let mean = v.iter().map(|x| x.0).sum::<f64>() / v.len().max(1) as f64;
             let ends = v.iter().filter(|x| x.1).count();
             let pushes = v.iter().map(|x| f64::from(x.2)).sum::<f64>() / v.len().max(1) as f64;
-            let each: Vec<String> = v.iter().map(|x| format!("{:.1}", x.0)).collect();
+            let each: Vec<String> = v.iter().map(|x| format!("{:.2}", x.0)).collect();
             line += &format!(
                 "  {k}: {mean:.2} mm ends {ends}/{} pushes {pushes:.0} [{}]",
                 v.len(),

@@ -1067,7 +1067,7 @@ mod tests {
             adapt: BenchAdaptArgs,
         }
         let cli = Cli::try_parse_from(["adapt"]).expect("defaults");
-        assert_eq!(cli.adapt.seeds.all(), vec![100, 101, 102, 103, 104]);
+        assert_eq!(cli.adapt.seeds.all(), vec![200, 201, 202, 203, 204]);
         let cli = Cli::try_parse_from([
             "adapt",
             "--seeds",

@@ -2,8 +2,10 @@
 //! over them, and the parts of a run gathered for a merge ([`gather`]).
 //!
 //! Seeds 1 to 10 are the tuning seeds: every constant of the planners and the learner was
-//! chosen on them. Reported figures use seeds from [`FIRST_REPORTED_SEED`] on, which no
-//! constant saw. `--seed S` runs one seed, the old way (tests and quick looks).
+//! chosen on them. Seeds 11-30 and 100-109 informed design choices later (README, Seeds):
+//! they are no longer held out. Reported figures use seeds from [`FIRST_REPORTED_SEED`]
+//! on, which no constant and no choice saw. `--seed S` runs one seed, the old way (tests
+//! and quick looks).
 
 use std::fmt;
 use std::path::Path;
@@ -13,8 +15,9 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 
-/// The first seed of the reported figures: nothing was tuned on it or after it.
-pub const FIRST_REPORTED_SEED: u64 = 100;
+/// The first seed of the reported figures: nothing was tuned or chosen on it or after it
+/// (100 until issue 32: seeds 100-109 then had informed design choices).
+pub const FIRST_REPORTED_SEED: u64 = 200;
 
 /// The seeds of every benchmark: `--seeds N` from `--first-seed`, or `--seed S` alone,
 /// and `--shard I/N` to run a share of them.
@@ -569,8 +572,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_default_runs_five_held_out_seeds_from_100() {
-        assert_eq!(SeedArgs::default().all(), vec![100, 101, 102, 103, 104]);
+    fn the_default_runs_five_held_out_seeds_from_200() {
+        assert_eq!(SeedArgs::default().all(), vec![200, 201, 202, 203, 204]);
         assert_eq!(SeedArgs::one(7).mine(), vec![7]);
     }
 
