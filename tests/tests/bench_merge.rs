@@ -162,7 +162,7 @@ fn learning_shards_merge_into_what_one_run_writes() {
         "--scenario",
         "triangle",
         "--trials",
-        "4",
+        "12",
         "--eval",
         "4",
         "--out",

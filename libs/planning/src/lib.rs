@@ -1,5 +1,6 @@
 //! The planner's logic, free of shared memory: contact inference from IR, the push, circling and travel routines, the push choice, the learning protocol against any [`LearnWorld`], and episodes of the benchmark tasks (Algorithm 5) against any [`World`]: the physics process over iceoryx2 or, with feature `sim`, the physics library in-process.
 
+mod active_trial_chooser;
 mod circle_routine;
 mod episode;
 mod estimate_log;
@@ -12,6 +13,7 @@ mod push_service;
 mod travel;
 mod world;
 
+pub use active_trial_chooser::{ActiveSettings, ActiveTrialChooser, TrialChoice, run_active};
 pub use agp_affordance::approach_start;
 pub use circle_routine::{CircleOutcome, CirclePhase, CircleRoutine, CircleSettings, Side};
 pub use episode::{

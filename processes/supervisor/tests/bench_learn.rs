@@ -33,7 +33,8 @@ fn the_defaults_are_the_benchmarks_protocol_on_the_four_built_ins() {
     assert_eq!(a.eval, 200);
     // Five held-out seeds from 100, each learning every object anew.
     assert_eq!(a.seeds.all(), [100, 101, 102, 103, 104]);
-    assert_eq!(a.trials, 60);
+    // The paper's 180 trials: 60 per alpha.
+    assert_eq!(a.trials, 180);
     assert_eq!(a.push_s, 0.5);
     assert_eq!(a.out, Path::new("results/learn"));
     assert_eq!(a.json, None);
@@ -43,6 +44,21 @@ fn the_defaults_are_the_benchmarks_protocol_on_the_four_built_ins() {
 fn alphas_are_a_comma_list_that_takes_negative_numbers() {
     assert_eq!(args(&[]).alphas, [0.0, 15.0, -15.0]);
     assert_eq!(args(&["--alphas", "-5,0,5"]).alphas, [-5.0, 0.0, 5.0]);
+}
+
+#[test]
+fn the_protocol_is_the_papers_unless_told_active() {
+    use agp_harness::bench_learn::ProtocolArg;
+    assert_eq!(args(&[]).protocol, ProtocolArg::Paper);
+    let a = args(&["--protocol", "active", "--trials", "90"]);
+    assert_eq!(a.protocol, ProtocolArg::Active);
+    assert_eq!(a.trials, 90);
+}
+
+#[test]
+fn the_papers_protocol_refuses_trials_it_cannot_share_evenly_among_the_alphas() {
+    let err = run(&args(&["--trials", "100"])).expect_err("refused");
+    assert!(format!("{err:#}").contains("multiple of 3"), "{err:#}");
 }
 
 #[test]
@@ -68,7 +84,7 @@ fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
         "--scenario",
         "triangle",
         "--trials",
-        "10",
+        "30",
         "--eval",
         "20",
         "--json",
@@ -84,7 +100,7 @@ fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
     assert_eq!(doc["benchmark"], "learn");
     assert_eq!(doc["seed"], 7);
     assert!(doc["wall_time_s"].as_f64().is_some_and(|t| t > 0.0));
-    // Ten trials and twenty pushes are not the benchmark's protocol, and it says so.
+    // Ten trials per alpha and twenty pushes are not the benchmark's protocol, and it says so.
     assert_eq!(doc["protocol_as_specified"], false);
     let tri = &doc["objects"]["triangle"];
     for alpha in ["0", "15", "-15"] {
@@ -273,7 +289,7 @@ fn the_agp_binary_prints_json_on_stdout_with_json_dash_and_the_tables_on_stderr(
             "--scenario",
             "circle",
             "--trials",
-            "6",
+            "18",
             "--eval",
             "5",
             "--json",

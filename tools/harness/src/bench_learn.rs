@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use crate::learn_bench::{
     LearnBenchConfig, LearnBenchError, MIN_EVAL_PUSHES, ObjectReport,
-    PAPER_TRIANGLE_MAX_ROTATION_DEG, check_object, run_object,
+    PAPER_TRIANGLE_MAX_ROTATION_DEG, TrialProtocol, check_object, run_object,
 };
 use crate::side_by_side::side_by_side;
 use agp_world::{BUILTIN_NAMES, Scenario};
@@ -30,6 +30,27 @@ use crate::seeds::{
 const PAPER_ALPHAS_DEG: [f64; 3] = [0.0, 15.0, -15.0];
 /// Trials per alpha in the paper's protocol (one every 6 deg).
 const PAPER_TRIALS_PER_ALPHA: usize = 60;
+/// Trials in all of the paper's protocol (60 per alpha, three alphas).
+pub const PAPER_TRIALS: usize = 180;
+
+/// Where the learning trials are made (`--protocol`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProtocolArg {
+    /// The paper's: the trials evenly round the object, as many at each alpha.
+    Paper,
+    /// Each next trial where the gradient learned so far is least sure (the spread and
+    /// count its grids hold at the trial's aim point).
+    Active,
+}
+
+impl From<ProtocolArg> for TrialProtocol {
+    fn from(p: ProtocolArg) -> Self {
+        match p {
+            ProtocolArg::Paper => TrialProtocol::Paper,
+            ProtocolArg::Active => TrialProtocol::Active,
+        }
+    }
+}
 
 /// The learning phase: for each object, one circling for its shape, 60 push trials per
 /// alpha in {0, +15, -15} deg, then unseen pushes to check the learned gradient's
@@ -59,10 +80,22 @@ pub struct BenchLearnArgs {
     /// is reported as a missed target.
     #[arg(long, value_name = "N", default_value_t = MIN_EVAL_PUSHES)]
     pub eval: usize,
-    /// Trials per alpha, evenly spread round the object. The paper's protocol is 60; any
-    /// other number is said in the output.
-    #[arg(long, value_name = "N", default_value_t = PAPER_TRIALS_PER_ALPHA)]
+    /// Where the trials are made: `paper` (evenly round the object, as many per alpha) or
+    /// `active` (each next one where the gradient learned so far is least sure).
+    #[arg(long, value_enum, default_value_t = ProtocolArg::Paper)]
+    pub protocol: ProtocolArg,
+    /// Trials in all. The paper's protocol makes 180 (60 per alpha, one every 6 deg) and
+    /// takes a multiple of the number of alphas; any other number is said in the output.
+    #[arg(long, value_name = "N", default_value_t = PAPER_TRIALS)]
     pub trials: usize,
+    /// Instead of one run, the learning curve: both protocols at each of these trial
+    /// counts (each a run of its own over every seed and object), the error of unseen
+    /// pushes against the trials, written to `--json` and plotted (`--plot`).
+    #[arg(long, value_name = "N,..", value_delimiter = ',')]
+    pub curve: Vec<usize>,
+    /// The learning curve's plot [default: <out>/learning-curve.svg].
+    #[arg(long, value_name = "FILE", requires = "curve")]
+    pub plot: Option<PathBuf>,
     /// How long each push lasts once the robot touches the object, seconds (0.5 s gives
     /// the paper's largest triangle rotation at alpha 0).
     #[arg(long, value_name = "S", default_value_t = 0.5)]
@@ -89,7 +122,10 @@ impl BenchLearnArgs {
             seeds: SeedArgs::one(7),
             alphas: PAPER_ALPHAS_DEG.to_vec(),
             eval: MIN_EVAL_PUSHES,
-            trials: PAPER_TRIALS_PER_ALPHA,
+            protocol: ProtocolArg::Paper,
+            trials: PAPER_TRIALS,
+            curve: Vec::new(),
+            plot: None,
             push_s: 0.5,
             json: None,
             out,
@@ -142,6 +178,9 @@ impl Human {
 /// Runs `agp bench learn`. A missed target is reported, not an error: the exit code is
 /// success once every object was learned and every file written.
 pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
+    if !args.curve.is_empty() {
+        return crate::learn_curve::run_curve(args).map(|_| ExitCode::SUCCESS);
+    }
     learn(args).map(|_| ExitCode::SUCCESS)
 }
 
@@ -170,24 +209,29 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
         to_stderr: json_to_stdout,
     };
 
-    let as_specified = args.trials == PAPER_TRIALS_PER_ALPHA
+    let as_specified = cfg.protocol == TrialProtocol::Paper
+        && cfg.trials_per_alpha == PAPER_TRIALS_PER_ALPHA
         && args.eval >= MIN_EVAL_PUSHES
         && cfg.alphas_deg == PAPER_ALPHAS_DEG;
     human.say(
         "agp bench learn: physics in-process (the rapier2d simulator linked into `agp` as a library, not the `agp-physics` process over shared memory)",
     );
     human.say(&format!(
-        "{} {}{}, alphas {} deg, {} trials per alpha, {} unseen pushes, push {} s at {:.0} mm/s",
+        "{} {}{}, alphas {} deg, {}, {} unseen pushes, push {} s at {:.0} mm/s",
         if seeds.len() == 1 { "seed" } else { "seeds" },
         seed_list(&seeds),
         args.seeds.shard_note(),
         alphas_text(&cfg.alphas_deg),
-        cfg.trials_per_alpha,
+        protocol_text(&cfg),
         cfg.eval_pushes,
         cfg.push.push_duration,
         cfg.push.push_speed * 1e3
     ));
-    if !as_specified {
+    if cfg.protocol == TrialProtocol::Active {
+        human.say(
+            "note: the active protocol (issue 33), not the paper's: each trial where the gradient learned so far is least sure",
+        );
+    } else if !as_specified {
         human.say(&format!(
             "note: not the benchmark's protocol (alphas {} deg, {PAPER_TRIALS_PER_ALPHA} trials per alpha, at least {MIN_EVAL_PUSHES} unseen pushes): these figures are not benchmark results",
             alphas_text(&PAPER_ALPHAS_DEG)
@@ -269,8 +313,10 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
             "seed": seed,
             "physics": "in-process",
             "protocol_as_specified": as_specified,
+            "protocol": cfg.protocol.name(),
             "alphas_deg": cfg.alphas_deg,
-            "trials_per_alpha": cfg.trials_per_alpha,
+            "trials": cfg.total_trials(),
+            "trials_per_alpha": trials_per_alpha_json(&cfg),
             "eval_pushes": cfg.eval_pushes,
             "push_duration_s": cfg.push.push_duration,
             "objects": objects,
@@ -332,6 +378,8 @@ fn learn_signature(doc: &Value) -> Value {
     json!({
         "physics": doc["physics"],
         "alphas_deg": doc["alphas_deg"],
+        "protocol": doc["protocol"],
+        "trials": doc["trials"],
         "trials_per_alpha": doc["trials_per_alpha"],
         "eval_pushes": doc["eval_pushes"],
         "push_duration_s": doc["push_duration_s"],
@@ -450,7 +498,9 @@ fn assemble(parts: &SeedParts, shard: Option<Shard>) -> Value {
         "seed",
         "physics",
         "protocol_as_specified",
+        "protocol",
         "alphas_deg",
+        "trials",
         "trials_per_alpha",
         "eval_pushes",
         "push_duration_s",
@@ -602,6 +652,15 @@ fn config(args: &BenchLearnArgs, seed: u64) -> Result<LearnBenchConfig> {
     if args.trials == 0 {
         bail!("--trials must be at least 1");
     }
+    let protocol = TrialProtocol::from(args.protocol);
+    if protocol == TrialProtocol::Paper && args.trials % args.alphas.len().max(1) != 0 {
+        bail!(
+            "--trials {}: the paper's protocol makes as many trials at each of the {} alphas, so a multiple of {}",
+            args.trials,
+            args.alphas.len(),
+            args.alphas.len()
+        );
+    }
     if args.eval == 0 {
         bail!("--eval must be at least 1 (the benchmark asks for {MIN_EVAL_PUSHES})");
     }
@@ -626,7 +685,9 @@ fn config(args: &BenchLearnArgs, seed: u64) -> Result<LearnBenchConfig> {
     let mut cfg = LearnBenchConfig {
         seed,
         alphas_deg: args.alphas.clone(),
-        trials_per_alpha: args.trials,
+        protocol,
+        trials_per_alpha: args.trials / args.alphas.len().max(1),
+        active_trials: args.trials,
         eval_pushes: args.eval,
         ..LearnBenchConfig::default()
     };
@@ -695,12 +756,32 @@ fn write_files(
         .with_context(|| format!("cannot save the AG of `{}`", job.scenario.name))?;
     let plot_path = out.join(format!("{}.svg", job.stem));
     let title = format!(
-        "{}: learned affordance gradient (seed {}, {} trials per alpha, push {} s)",
-        job.scenario.name, cfg.seed, cfg.trials_per_alpha, cfg.push.push_duration
+        "{}: learned affordance gradient (seed {}, {}, push {} s)",
+        job.scenario.name,
+        cfg.seed,
+        protocol_text(cfg),
+        cfg.push.push_duration
     );
     agp_plot::plot_gradient(&report.gradient, &title, &plot_path)
         .with_context(|| format!("cannot plot the AG of `{}`", job.scenario.name))?;
     Ok((ag_path, plot_path))
+}
+
+/// How the trials are made, in words: "60 trials per alpha" or "active, 90 trials".
+fn protocol_text(cfg: &LearnBenchConfig) -> String {
+    match cfg.protocol {
+        TrialProtocol::Paper => format!("{} trials per alpha", cfg.trials_per_alpha),
+        TrialProtocol::Active => format!("active, {} trials in all", cfg.active_trials),
+    }
+}
+
+/// The JSON's `trials_per_alpha`: the paper protocol's, null for the active one (which
+/// chooses its alphas).
+fn trials_per_alpha_json(cfg: &LearnBenchConfig) -> Value {
+    match cfg.protocol {
+        TrialProtocol::Paper => json!(cfg.trials_per_alpha),
+        TrialProtocol::Active => Value::Null,
+    }
 }
 
 fn alphas_text(alphas: &[f64]) -> String {
@@ -752,8 +833,16 @@ fn table(job: &Job, r: &ObjectReport, wall_s: f64) -> String {
         r.name, job.scenario.source, symmetry
     ));
     line(format!(
-        "trials {}: learned {}, no contact {}, refused by the estimator {}",
-        r.trials, r.learned, r.no_contact, r.rejected
+        "trials {}: learned {}, no contact {}, refused by the estimator {}; pushed per alpha {}",
+        r.trials,
+        r.learned,
+        r.no_contact,
+        r.rejected,
+        r.pushed_by_alpha
+            .iter()
+            .map(|(a, n)| format!("{a:+}: {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
     ));
     line("largest single-push rotation, deg:".into());
     line(format!(
@@ -892,6 +981,11 @@ fn object_json(
         },
         "trials": r.trials,
         "trials_learned": r.learned,
+        "pushed_by_alpha": r
+            .pushed_by_alpha
+            .iter()
+            .map(|&(a, n)| (alpha_key(a), json!(n)))
+            .collect::<Map<String, Value>>(),
         "targets": r.targets().iter().map(|t| json!({
             "what": t.what, "measured": t.measured, "met": t.met,
         })).collect::<Vec<_>>(),

@@ -9,9 +9,10 @@
 //! be; it sees only IR frames and odometry. The evaluation alone reads the simulator's
 //! ground truth: the world records it as the protocol's events pass.
 //!
-//! Per object: one circling for the shape, then `trials_per_alpha` trials per alpha, one
-//! every `360 / trials_per_alpha` degrees round the object, each starting from the object
-//! at its start pose; then `eval_pushes` unseen pushes from random contact points with a
+//! Per object: one circling for the shape, then the trials, each starting from the object
+//! at its start pose: the paper's protocol makes `trials_per_alpha` per alpha, one every
+//! `360 / trials_per_alpha` degrees round the object; the active one `active_trials` in
+//! all, each where the gradient learned so far is least sure (`agp_planning::run_active`); then `eval_pushes` unseen pushes from random contact points with a
 //! random alpha in [-15, 15] deg, predicted by the learned gradient and compared with what
 //! the simulator did.
 
@@ -25,8 +26,9 @@ use agp_affordance::{
 };
 use agp_physics::{Sim, SimBuildError, SimConfig};
 use agp_planning::{
-    CircleSettings, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
-    LearnWorld, ProtocolStep, PushSettings, SHAPE_APPROACH_TIMEOUT_S,
+    ActiveSettings, ActiveTrialChooser, CircleSettings, LearnFrame, LearnProtocol,
+    LearnProtocolError, LearnProtocolSettings, LearnWorld, ProtocolStep, PushSettings,
+    SHAPE_APPROACH_TIMEOUT_S, run_active,
 };
 use agp_shared_types::angle::wrap_angle;
 use agp_shared_types::{LearnEvent, LearnEventKind, LearnReport, LearnReportKind};
@@ -54,10 +56,33 @@ pub const TARGET_POSE_POSITION_MM: f64 = 5.0;
 /// Target: median orientation error of the pose from one circling, degrees.
 pub const TARGET_POSE_ORIENTATION_DEG: f64 = 5.0;
 
+/// Alphas of the paper's protocol (0, +15, -15 deg).
+const ALPHAS_IN_PAPER: usize = 3;
 /// Longest push this bench accepts, seconds.
 const MAX_PUSH_DURATION_S: f64 = 10.0;
 /// Stream of the evaluation's random pushes (the simulator's noise uses others).
 const EVAL_RNG_STREAM: u64 = 99;
+
+/// Where the learning trials are made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TrialProtocol {
+    /// The paper's: `trials_per_alpha` starts evenly round the object per alpha.
+    #[default]
+    Paper,
+    /// Each next trial where the gradient learned so far is least sure
+    /// ([`ActiveTrialChooser`]), `active_trials` in all.
+    Active,
+}
+
+impl TrialProtocol {
+    /// Its name on the command line and in the JSON: `paper`, `active`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrialProtocol::Paper => "paper",
+            TrialProtocol::Active => "active",
+        }
+    }
+}
 
 /// How the learning phase and its evaluation are run.
 #[derive(Debug, Clone)]
@@ -66,8 +91,15 @@ pub struct LearnBenchConfig {
     pub seed: u64,
     /// Alphas of the trials, degrees.
     pub alphas_deg: Vec<f64>,
-    /// Trials per alpha, evenly spread round the object (60: one every 6 deg).
+    /// Where the trials are made.
+    pub protocol: TrialProtocol,
+    /// Trials per alpha, evenly spread round the object (60: one every 6 deg), for the
+    /// paper's protocol.
     pub trials_per_alpha: usize,
+    /// Trials in all, for the active protocol.
+    pub active_trials: usize,
+    /// How the active protocol scores its candidates.
+    pub active: ActiveSettings,
     /// Unseen pushes of the prediction check.
     pub eval_pushes: usize,
     /// Approach and push. The default pushes for 0.5 s at 100 mm/s (about 40 mm): the
@@ -98,7 +130,10 @@ impl Default for LearnBenchConfig {
         Self {
             seed: 7,
             alphas_deg: p.alphas_deg,
+            protocol: TrialProtocol::Paper,
             trials_per_alpha: p.trials_per_alpha as usize,
+            active_trials: p.trials_per_alpha as usize * ALPHAS_IN_PAPER / 2,
+            active: ActiveSettings::default(),
             eval_pushes: MIN_EVAL_PUSHES,
             push: p.push,
             circle: p.circle,
@@ -112,11 +147,24 @@ impl Default for LearnBenchConfig {
 }
 
 impl LearnBenchConfig {
-    /// The protocol these settings run.
+    /// Trials of the learning phase in all.
+    pub fn total_trials(&self) -> usize {
+        match self.protocol {
+            TrialProtocol::Paper => self.alphas_deg.len() * self.trials_per_alpha,
+            TrialProtocol::Active => self.active_trials,
+        }
+    }
+
+    /// The protocol these settings run (the active protocol's trials per alpha: its trials
+    /// in all over the alphas, rounded up, which only the events' `total` shows).
     pub fn protocol(&self) -> LearnProtocolSettings {
+        let per_alpha = match self.protocol {
+            TrialProtocol::Paper => self.trials_per_alpha,
+            TrialProtocol::Active => self.active_trials.div_ceil(self.alphas_deg.len().max(1)),
+        };
         LearnProtocolSettings {
             alphas_deg: self.alphas_deg.clone(),
-            trials_per_alpha: u32::try_from(self.trials_per_alpha).unwrap_or(u32::MAX),
+            trials_per_alpha: u32::try_from(per_alpha).unwrap_or(u32::MAX),
             push: self.push,
             circle: self.circle,
             start_margin_m: self.start_margin_m,
@@ -129,7 +177,7 @@ impl LearnBenchConfig {
     /// Steps [`run_object`] reports progress in: the shape circling, every trial and every
     /// unseen push.
     pub fn progress_total(&self) -> usize {
-        1 + self.alphas_deg.len() * self.trials_per_alpha + self.eval_pushes
+        1 + self.total_trials() + self.eval_pushes
     }
 
     fn validate(&self) -> Result<(), LearnBenchError> {
@@ -150,8 +198,11 @@ impl LearnBenchConfig {
         {
             return bad("alphas_deg", format!("{a}"), "within [-45, 45] deg");
         }
-        if self.trials_per_alpha == 0 {
-            return bad("trials_per_alpha", "0".into(), "at least 1");
+        if self.total_trials() == 0 {
+            return bad("trials", "0".into(), "at least 1");
+        }
+        if self.protocol == TrialProtocol::Active && self.active.starts_per_alpha == 0 {
+            return bad("active.starts_per_alpha", "0".into(), "at least 1");
         }
         let d = self.push.push_duration;
         if !(d.is_finite() && d > 0.0 && d <= MAX_PUSH_DURATION_S) {
@@ -400,6 +451,8 @@ pub struct ObjectReport {
     pub trials: usize,
     /// Trials learned into the gradient.
     pub learned: usize,
+    /// Per alpha (degrees), the trials that pushed the object and circled it.
+    pub pushed_by_alpha: Vec<(f64, usize)>,
     /// Trials whose push never touched the object.
     pub no_contact: usize,
     /// Trials the session refused (no pose match, say).
@@ -662,7 +715,7 @@ impl BenchWorld {
             aim_obj: None,
             heading_obj: None,
             trial_alpha: f64::NAN,
-            trials: Vec::with_capacity(cfg.alphas_deg.len() * cfg.trials_per_alpha),
+            trials: Vec::with_capacity(cfg.total_trials()),
             no_contact: 0,
             circle_timeouts: 0,
             shape_points: 0,
@@ -675,6 +728,11 @@ impl BenchWorld {
         let s = self.sim.sensors();
         self.perception
             .observe(s.ir_sample, &s.ir_raw, s.odometry, s.fix, s.fix_seq);
+    }
+
+    /// The gradient the learner's session holds so far.
+    fn gradient(&self) -> Option<&AffordanceGradient> {
+        self.learner.session().map(|s| s.gradient())
     }
 
     /// Starts watching for the first touch of a push.
@@ -963,8 +1021,13 @@ pub fn run_object(
         learned_symmetry_order: session.symmetry_order,
         learned_border_radius_mm: session.border_radius_mm,
         shape_circling_moved_object_mm: learning.shape_circling_moved_object_mm,
-        trials: cfg.alphas_deg.len() * cfg.trials_per_alpha,
+        trials: cfg.total_trials(),
         learned: session.learned,
+        pushed_by_alpha: cfg
+            .alphas_deg
+            .iter()
+            .map(|&a| (a, trials.iter().filter(|t| t.alpha_deg == a).count()))
+            .collect(),
         no_contact: learning.no_contact,
         rejected: session.rejected.saturating_sub(learning.no_contact),
         circle_timeouts: learning.circle_timeouts,
@@ -1025,13 +1088,27 @@ fn learn(
     // The shape circling starts outside anything the grid can hold; everything after it
     // starts from the border learned.
     let mut protocol = LearnProtocol::new(cfg.protocol(), robot, object0);
-    protocol
-        .run(world, &mut |step| match step {
-            ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling),
-            ProtocolStep::Trial { .. } => tick(LearnStage::Trials),
-            ProtocolStep::Again { .. } | ProtocolStep::Learned(_) => {}
-        })
-        .map_err(protocol_error)?;
+    let mut progress = |step: ProtocolStep| match step {
+        ProtocolStep::ShapeLearned { .. } => tick(LearnStage::ShapeCircling),
+        ProtocolStep::Trial { .. } => tick(LearnStage::Trials),
+        ProtocolStep::Again { .. } | ProtocolStep::Learned(_) => {}
+    };
+    let learned = match cfg.protocol {
+        TrialProtocol::Paper => protocol.run(world, &mut progress),
+        TrialProtocol::Active => {
+            let mut chooser =
+                ActiveTrialChooser::new(cfg.active.clone(), &cfg.alphas_deg, object0.theta);
+            run_active(
+                &mut protocol,
+                &mut chooser,
+                world,
+                u32::try_from(cfg.active_trials).unwrap_or(u32::MAX),
+                BenchWorld::gradient,
+                &mut progress,
+            )
+        }
+    };
+    learned.map_err(protocol_error)?;
     let learning = Learning {
         trials: std::mem::take(&mut world.trials),
         no_contact: world.no_contact,

@@ -22,6 +22,7 @@ pub mod evaluation;
 pub mod hop;
 pub mod in_process;
 pub mod learn_bench;
+pub mod learn_curve;
 pub mod math;
 pub mod pipeline;
 pub mod pipeline_bench;
