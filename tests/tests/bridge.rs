@@ -1,10 +1,12 @@
 //! `agp bridge` between two instances on this machine, joined only over Zenoh on the
 //! loopback: instance A runs physics and the estimator, instance B the planner; each
 //! instance's supervisor runs its end of the bridge as the `remote` process of its launch
-//! file. A placement across the bridge in lockstep ends with the object placed, judged by
-//! ground truth on A; a hot swap of B's planner during it keeps the run going to the goal.
+//! file. A hot swap of B's planner during a placement across the bridge in lockstep keeps the
+//! run going to the goal, judged by ground truth on A (a placement alone is
+//! `bridge_tls.rs`'s, and one through two cuts of the link `bridge_faults.rs`'s).
 //! In a live session the goals cross too: A's supervisor owns them and judges them, B's
-//! serving planner pursues them, and its ends come back across the bridge; a swap of B's
+//! serving planner pursues them, and its ends come back across the bridge (here over mutual
+//! TLS); a swap of B's
 //! planner mid-goal still reaches the goal, and the session also runs on the realtime
 //! clock.
 
@@ -12,8 +14,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use agp_tests::{
-    AgpUp, Finished, LaunchDir, StepLog, assert_every_step_applied_once, assert_placed,
-    count_instance_files, learned_ag, run_agp, status_json,
+    AgpUp, Finished, LaunchDir, StepLog, assert_every_step_applied_once, count_instance_files,
+    learned_ag, run_agp, status_json,
 };
 use serde_json::Value;
 
@@ -52,48 +54,6 @@ fn planner_launch(instance: &str, port: u16) -> String {
          [[process]]\nname = \"planner\"\nexec = \"agp-planner\"\n\
          args = [\"--mode\", \"place\", \"--planner\", \"affordance\"]\nends_run = true\n"
     )
-}
-
-#[test]
-fn a_planner_in_another_instance_joined_only_by_the_bridge_places_the_object() {
-    let _shared = MACHINE.read().unwrap_or_else(|e| e.into_inner());
-    let ag = learned_ag("triangle");
-    let (a, b) = ("t-br-place-rob", "t-br-place-pla");
-    let port = 27_461;
-    let robot = LaunchDir::new(&robot_launch(a, &ag, port));
-    let planner = LaunchDir::new(&planner_launch(b, port));
-    let before = (count_instance_files(a), count_instance_files(b));
-    let up_a = AgpUp::start(&robot.launch(), &[]);
-    let up_b = AgpUp::start(&planner.launch(), &[]);
-    let end_b = up_b.wait(PLACE_TIMEOUT);
-    let end_a = up_a.wait(TIMEOUT);
-    assert_placement_ran_out(&end_a, &end_b);
-    assert!(
-        end_a.stdout.contains("run over: `planner` finished it"),
-        "{}",
-        end_a.stdout
-    );
-    // Judged by ground truth on A, where the object is.
-    let (mm, deg) = assert_placed(&robot.results(), a, "triangle", &end_a.stdout);
-    // Lockstep across the bridge: no step lost or applied twice.
-    let log = StepLog::new(robot.path().join("steps.log")).poll().to_vec();
-    assert_every_step_applied_once(&log);
-    assert_eq!(
-        count_instance_files(a),
-        0,
-        "files of `{a}` remain ({} before)",
-        before.0
-    );
-    assert_eq!(
-        count_instance_files(b),
-        0,
-        "files of `{b}` remain ({} before)",
-        before.1
-    );
-    println!(
-        "placed across the bridge: {} steps, final error {mm:.1} mm, {deg:.1} deg",
-        log.len()
-    );
 }
 
 /// Both halves of a placement across the bridge ended as they should: B's planner finished
@@ -191,14 +151,43 @@ fn planner_session_launch(instance: &str, port: u16) -> String {
 /// circling the object or pushing it, far from placing it.
 const GOAL_STEPS_BEFORE_SWAP: usize = 8_000;
 
+/// A launch file of this module's with its link on mutual TLS, the keys made by
+/// `agp bridge keygen` into `keys` (made in `dir`).
+fn over_tls(launch: String, dir: &Path, keys: &Path) -> String {
+    if !keys.exists() {
+        run_agp(
+            dir,
+            &["bridge", "keygen", keys.to_str().expect("a UTF-8 path")],
+            TIMEOUT,
+        )
+        .assert_success("`agp bridge keygen`");
+    }
+    launch
+        .replace("\"tcp/127.0.0.1:", "\"tls/127.0.0.1:")
+        .replace("insecure = true", &format!("tls = \"{}\"", keys.display()))
+}
+
 #[test]
-fn a_swap_of_the_remote_planner_during_a_live_session_across_the_bridge_still_reaches_the_goal() {
+fn a_swap_of_the_remote_planner_during_a_live_session_across_a_mutual_tls_bridge_still_reaches_the_goal()
+ {
     let _shared = MACHINE.read().unwrap_or_else(|e| e.into_inner());
     let ag = learned_ag("triangle");
     let (a, b) = ("t-br-live-rob", "t-br-live-pla");
     let port = 27_463;
-    let robot = LaunchDir::new(&robot_session_launch(a, &ag, port));
-    let planner = LaunchDir::new(&planner_session_launch(b, port));
+    // Over mutual TLS: a live goal reached across a TLS link (the placements over it are
+    // `bridge_tls.rs`'s).
+    let keys_dir = tempfile::tempdir().expect("a temporary folder");
+    let keys = keys_dir.path().join("keys");
+    let robot = LaunchDir::new(&over_tls(
+        robot_session_launch(a, &ag, port),
+        keys_dir.path(),
+        &keys,
+    ));
+    let planner = LaunchDir::new(&over_tls(
+        planner_session_launch(b, port),
+        keys_dir.path(),
+        &keys,
+    ));
     let up_a = AgpUp::start(&robot.launch(), &[]);
     let mut up_b = AgpUp::start(&planner.launch(), &[]);
     up_b.wait_for_lines("serving the goals", 1, PLACE_TIMEOUT);

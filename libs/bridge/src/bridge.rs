@@ -13,6 +13,16 @@
 //!   or reordered), checks each header, writes the bytes once into a loaned sample and
 //!   notifies the topic's event service.
 //!
+//! The far end may go and come back (a link cut, its bridge restarted): the in thread watches
+//! the Zenoh peers of the session. When the far peer is lost or replaced, this end says hello
+//! again with a new nonce (a far bridge that restarted owes it the latched state, one that
+//! only lost the link owes what it latched since), and the out thread holds what it drains
+//! until the far end's next hello, as it did before the first. A far end gone longer than
+//! [`BridgeConfig::far_timeout`] after it had joined ends the bridge
+//! ([`BridgeEnd::FarGone`]): a planner side that stopped before it could say `bye`, or a
+//! robot side that is no more, never leaves the other waiting for ever. A far end that never
+//! joined is waited for as long as it takes (either side may start first).
+//!
 //! Epochs and tokens belong to each instance's supervisor. The planner side forwards the
 //! commands and resets of its own active epoch only (and, if its supervisor handed it the
 //! session key, only those carrying that epoch's token); the robot side republishes them
@@ -63,7 +73,21 @@ pub struct BridgeConfig {
     pub node_name: String,
     /// How the out thread waits for the next message.
     pub wait: WaitStrategy,
+    /// How long the far end may be gone (no peer on the link) once it had joined before
+    /// this end gives up ([`BridgeEnd::FarGone`]); a cut or a restart of the far bridge
+    /// shorter than this is ridden out.
+    pub far_timeout: Duration,
+    /// Planner side, lockstep only: the last motor command sent goes again to a far end
+    /// that joins again after it was lost (a cut may swallow it, and the ring then waits
+    /// for ever for the frame it makes). Physics drops a command of a step that passed, so
+    /// the repeat is harmless in lockstep; on the realtime clock it would drive the wheels
+    /// with a stale command, and is never sent.
+    pub redeliver_command: bool,
 }
+
+/// The default of [`BridgeConfig::far_timeout`]: longer than a far bridge's restart, or a
+/// far supervisor's `agp up` again after it was killed, on a loaded machine.
+pub const FAR_TIMEOUT: Duration = Duration::from_secs(15);
 
 /// Why a bridge stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,6 +98,9 @@ pub enum BridgeEnd {
     Stopped,
     /// This instance's supervisor is gone (its control service with it).
     InstanceDown,
+    /// The far end joined, then was gone for this long without saying `bye` (killed, its
+    /// computer or the link down): this end gives up.
+    FarGone(Duration),
 }
 
 /// What a bridge did, at its end.
@@ -86,6 +113,8 @@ pub struct BridgeReport {
     pub stale: u64,
     /// Commands and resets without their epoch's token, not forwarded.
     pub refused: u64,
+    /// Times the far end was lost (or replaced by another) after it had joined.
+    pub far_lost: u64,
 }
 
 /// Why a bridge failed.
@@ -115,6 +144,11 @@ const OUT_SLICE: Duration = Duration::from_millis(20);
 const IN_SLICE: Duration = Duration::from_millis(20);
 /// How often a receiving end repeats its hello until it is welcomed.
 const HELLO_EVERY: Duration = Duration::from_millis(100);
+/// How long a stopping end waits for a far end to be there to hear its `bye` (under a
+/// supervisor's stop grace, 3 s by default).
+const BYE_WAIT: Duration = Duration::from_millis(1500);
+/// How often the in thread looks at the session's peers (is the far end still there?).
+const PEER_CHECK_EVERY: Duration = Duration::from_millis(20);
 /// How often the in thread looks whether this instance's supervisor still runs.
 const INSTANCE_CHECK_EVERY: Duration = Duration::from_millis(250);
 /// How often the in thread's publishers hand their history to new subscribers (physics and
@@ -136,6 +170,11 @@ struct Shared {
     received: [AtomicU64; BRIDGED_TOPICS.len()],
     stale: AtomicU64,
     refused: AtomicU64,
+    /// Bumped by the in thread each time the far end is lost or replaced: the out thread
+    /// then holds what it drains until the next hello.
+    far_lost: AtomicU64,
+    /// The far end said `bye` or is gone for good: nobody is there to hear this end's.
+    far_over: AtomicBool,
 }
 
 fn slot(topic: &BridgedTopic) -> usize {
@@ -193,6 +232,8 @@ pub fn run_bridge(
         received: Default::default(),
         stale: AtomicU64::new(0),
         refused: AtomicU64::new(0),
+        far_lost: AtomicU64::new(0),
+        far_over: AtomicBool::new(false),
     });
     let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), BridgeError>>(1);
     let out = {
@@ -235,6 +276,7 @@ pub fn run_bridge(
             .collect(),
         stale: shared.stale.load(Ordering::Relaxed),
         refused: shared.refused.load(Ordering::Relaxed),
+        far_lost: shared.far_lost.load(Ordering::Relaxed),
     })
 }
 
@@ -295,6 +337,12 @@ struct Outgoing {
     port: Box<dyn OutPort>,
     cache: Cache,
     header: ZBytes,
+    /// The last message sent, kept when it goes again to a far end that joins again
+    /// ([`BridgeConfig::redeliver_command`]).
+    last: Option<Vec<u8>>,
+    /// Motor commands on the realtime clock: those drained while a far end that had joined
+    /// is away are stale by the time it is back, and are dropped, not held for it.
+    stale_when_held: bool,
 }
 
 fn out_loop(
@@ -332,19 +380,43 @@ fn out_loop(
     let mut state = OutState {
         served: None,
         live: false,
+        joined_once: false,
         pending: std::collections::VecDeque::new(),
         active: shared.active_epoch.load(Ordering::Relaxed),
     };
+    let mut far_lost_seen = 0;
     let mut last_activity = Instant::now();
     loop {
         if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
-            if state.live {
-                let _ = publisher
-                    .put(Vec::<u8>::new())
-                    .attachment(ZBytes::from(Header::Bye.encode()))
-                    .wait();
+            if shared.far_over.load(Ordering::SeqCst) {
+                return Ok(());
             }
+            // Said whether or not a far end was welcomed: one that joined a moment ago, whose
+            // hello this thread had not answered yet, must not wait for this end (it would
+            // only notice after its far timeout). A far end that is connecting (this end
+            // stopped a moment after it started) gets a moment to be there to hear it.
+            let deadline = Instant::now() + BYE_WAIT;
+            while !publisher
+                .matching_status()
+                .wait()
+                .is_ok_and(|m| m.matching())
+                && Instant::now() < deadline
+            {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            let _ = publisher
+                .put(Vec::<u8>::new())
+                .attachment(ZBytes::from(Header::Bye.encode()))
+                .wait();
             return Ok(());
+        }
+        let lost = shared.far_lost.load(Ordering::SeqCst);
+        if lost != far_lost_seen {
+            // The far end is gone (or another took its place): what is drained from now on
+            // waits for its next hello, as before the first.
+            far_lost_seen = lost;
+            state.live = false;
+            state.served = None;
         }
         greet_far_ends(&hellos, &outgoing, &mut state, shared, &put)?;
         if let Some(epochs) = &epochs {
@@ -365,6 +437,8 @@ struct OutState {
     served: Option<u64>,
     /// A far end joined: messages go out as they are drained.
     live: bool,
+    /// A far end joined once (it may be away now).
+    joined_once: bool,
     /// (outgoing index, bytes) of unlatched messages drained before the far end joined.
     pending: std::collections::VecDeque<(usize, Vec<u8>)>,
     /// The epoch the supervisor made active, as last read.
@@ -414,6 +488,16 @@ fn greet_far_ends(
                 Ok(())
             })?;
         }
+        // A far end that joins again gets the last command sent again, unless a newer one
+        // waits in `pending` (it may not have arrived before the link went).
+        for (i, o) in outgoing.iter().enumerate() {
+            if let Some(last) = o.last.as_ref().filter(|l| !l.is_empty())
+                && !state.pending.iter().any(|(j, _)| *j == i)
+            {
+                put(last, &o.header)?;
+                shared.sent[o.slot].fetch_add(1, Ordering::Relaxed);
+            }
+        }
         // Then what was sent before it joined, in the order it was drained.
         for (i, bytes) in state.pending.drain(..) {
             let o = &outgoing[i];
@@ -423,6 +507,7 @@ fn greet_far_ends(
         put(&[], &ZBytes::from(Header::Welcome { nonce }.encode()))?;
         state.served = Some(nonce);
         state.live = true;
+        state.joined_once = true;
     }
     Ok(())
 }
@@ -443,6 +528,7 @@ fn forward_outgoing(
     let (side, key) = (config.side, config.key);
     let OutState {
         live,
+        joined_once,
         pending,
         active,
         ..
@@ -455,6 +541,8 @@ fn forward_outgoing(
         let cache = &mut o.cache;
         let header = &o.header;
         let slot = o.slot;
+        let last = &mut o.last;
+        let dropped_when_held = o.stale_when_held && *joined_once;
         let drained = o.port.drain(&mut |bytes, auth| {
             if failed.is_some() {
                 return;
@@ -476,6 +564,10 @@ fn forward_outgoing(
                 }
             }
             cache.keep(bytes);
+            if let Some(l) = last.as_mut() {
+                l.clear();
+                l.extend_from_slice(bytes);
+            }
             if *live {
                 match put(bytes, header) {
                     Ok(()) => {
@@ -483,7 +575,7 @@ fn forward_outgoing(
                     }
                     Err(e) => failed = Some(e),
                 }
-            } else if !latched {
+            } else if !latched && !dropped_when_held {
                 if pending.len() >= PENDING_MAX {
                     pending.pop_front();
                 }
@@ -541,6 +633,13 @@ fn open_out(
             slot: slot(topic),
             port,
             cache: Cache::of(topic.latch),
+            last: (config.redeliver_command
+                && config.side == Side::Planner
+                && topic.service == agp_shared_types::ServiceNames::MOTOR_COMMANDS)
+                .then(Vec::new),
+            stale_when_held: !config.redeliver_command
+                && config.side == Side::Planner
+                && topic.service == agp_shared_types::ServiceNames::MOTOR_COMMANDS,
             header: ZBytes::from(
                 Header::Data {
                     service: topic.service,
@@ -644,6 +743,156 @@ fn wait_for_any(
     }
 }
 
+/// The next message from the far end, waiting as `strategy` says: polling (with a yield
+/// between polls) while the last message is newer than its spin, then blocking for at most
+/// [`IN_SLICE`]. `Ok(None)` when none came.
+pub(crate) fn next_sample(
+    subscriber: &InSubscriber,
+    strategy: WaitStrategy,
+    idle: Duration,
+) -> zenoh::Result<Option<zenoh::sample::Sample>> {
+    let spin = match strategy {
+        WaitStrategy::Spin | WaitStrategy::Yield => IN_SLICE,
+        WaitStrategy::SpinThenBlock { spin } => spin.saturating_sub(idle),
+        WaitStrategy::Block => Duration::ZERO,
+    };
+    if !spin.is_zero() {
+        let until = Instant::now() + spin;
+        loop {
+            if let Some(s) = subscriber.try_recv()? {
+                return Ok(Some(s));
+            }
+            if Instant::now() >= until {
+                break;
+            }
+            if matches!(strategy, WaitStrategy::Spin) {
+                core::hint::spin_loop();
+            } else {
+                std::thread::yield_now();
+            }
+        }
+        if !matches!(strategy, WaitStrategy::SpinThenBlock { .. }) {
+            return Ok(None);
+        }
+    }
+    subscriber.recv_timeout(IN_SLICE)
+}
+
+/// The far end's messages to this end, as they come.
+pub(crate) type InSubscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// This end's hello to the far end: said every [`HELLO_EVERY`] until a welcome names its
+/// nonce, and again under a new nonce when the far end was lost or replaced.
+struct Greeting {
+    nonce: u64,
+    hello: ZBytes,
+    welcomed: bool,
+    last: Option<Instant>,
+}
+
+impl Greeting {
+    fn new() -> Self {
+        let nonce = agp_shared_types::monotonic_ns() ^ (u64::from(std::process::id()) << 40);
+        Self {
+            nonce,
+            hello: ZBytes::from(Header::Hello { nonce }.encode()),
+            welcomed: false,
+            last: None,
+        }
+    }
+
+    /// Says hello when it is due.
+    fn say(&mut self, publisher: &zenoh::pubsub::Publisher<'_>) -> Result<(), BridgeError> {
+        if !self.welcomed && self.last.is_none_or(|t| t.elapsed() >= HELLO_EVERY) {
+            publisher
+                .put(Vec::<u8>::new())
+                .attachment(self.hello.clone())
+                .wait()
+                .map_err(zenoh_err)?;
+            self.last = Some(Instant::now());
+        }
+        Ok(())
+    }
+}
+
+/// Looks at the session's peers: a far end lost or replaced is counted (the out thread
+/// then holds what it drains) and will be greeted again, under a new nonce; one gone for
+/// the far timeout ends the bridge.
+fn watch_far(
+    session: &zenoh::Session,
+    far: &mut FarPeer,
+    greeting: &mut Greeting,
+    shared: &Shared,
+    config: &BridgeConfig,
+) -> Option<BridgeEnd> {
+    let peers: Vec<zenoh::session::ZenohId> = session.info().peers_zid().wait().collect();
+    match far.look(&peers) {
+        FarChange::None => {}
+        FarChange::Lost | FarChange::Replaced => {
+            shared.far_lost.fetch_add(1, Ordering::SeqCst);
+            *greeting = Greeting::new();
+        }
+    }
+    let gone = far.gone_for()?;
+    (gone >= config.far_timeout).then(|| {
+        shared.far_over.store(true, Ordering::SeqCst);
+        BridgeEnd::FarGone(gone)
+    })
+}
+
+/// The far end as the session's peers show it.
+#[derive(Debug, Default)]
+struct FarPeer {
+    /// The far end's Zenoh id while it is there.
+    id: Option<zenoh::session::ZenohId>,
+    /// A far end joined once.
+    joined: bool,
+    /// Since when no far end is there, once one had joined.
+    gone_since: Option<Instant>,
+}
+
+/// What became of the far end since the last look.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FarChange {
+    None,
+    /// No peer any more.
+    Lost,
+    /// Another peer in its place (it restarted between two looks).
+    Replaced,
+}
+
+impl FarPeer {
+    fn look(&mut self, peers: &[zenoh::session::ZenohId]) -> FarChange {
+        match (self.id, peers.first()) {
+            (Some(id), _) if peers.contains(&id) => FarChange::None,
+            (Some(_), Some(p)) => {
+                self.id = Some(*p);
+                FarChange::Replaced
+            }
+            (Some(_), None) => {
+                self.id = None;
+                self.gone_since = Some(Instant::now());
+                FarChange::Lost
+            }
+            (None, Some(p)) => {
+                self.id = Some(*p);
+                self.joined = true;
+                self.gone_since = None;
+                FarChange::None
+            }
+            (None, None) => FarChange::None,
+        }
+    }
+
+    /// How long the far end has been gone, once it had joined.
+    fn gone_for(&self) -> Option<Duration> {
+        self.gone_since
+            .filter(|_| self.joined && self.id.is_none())
+            .map(|t| t.elapsed())
+    }
+}
+
 fn in_loop(
     instance: &Instance,
     config: &BridgeConfig,
@@ -686,12 +935,12 @@ fn in_loop(
         .wait()
         .map_err(zenoh_err)?;
     on_ready();
-    let nonce = agp_shared_types::monotonic_ns() ^ (u64::from(std::process::id()) << 40);
-    let hello = ZBytes::from(Header::Hello { nonce }.encode());
-    let mut welcomed = false;
-    let mut last_hello: Option<Instant> = None;
+    let mut greeting = Greeting::new();
     let mut last_check = Instant::now();
     let mut last_update = Instant::now();
+    let mut far = FarPeer::default();
+    let mut last_peers = Instant::now();
+    let mut last_sample = Instant::now();
     loop {
         if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
             return Ok(BridgeEnd::Stopped);
@@ -702,14 +951,13 @@ fn in_loop(
             }
             last_check = Instant::now();
         }
-        if !welcomed && last_hello.is_none_or(|t| t.elapsed() >= HELLO_EVERY) {
-            hello_pub
-                .put(Vec::<u8>::new())
-                .attachment(hello.clone())
-                .wait()
-                .map_err(zenoh_err)?;
-            last_hello = Some(Instant::now());
+        if last_peers.elapsed() >= PEER_CHECK_EVERY {
+            last_peers = Instant::now();
+            if let Some(end) = watch_far(session, &mut far, &mut greeting, shared, config) {
+                return Ok(end);
+            }
         }
+        greeting.say(&hello_pub)?;
         if last_update.elapsed() >= UPDATE_CONNECTIONS_EVERY {
             // Only the latched topics keep a history to hand over.
             for (s, port) in &incoming {
@@ -719,11 +967,12 @@ fn in_loop(
             }
             last_update = Instant::now();
         }
-        let sample = match subscriber.recv_timeout(IN_SLICE) {
+        let sample = match next_sample(&subscriber, config.wait, last_sample.elapsed()) {
             Ok(Some(s)) => s,
             Ok(None) => continue,
             Err(e) => return Err(zenoh_err(e)),
         };
+        last_sample = Instant::now();
         let text = sample
             .attachment()
             .map(|a| a.to_bytes())
@@ -753,9 +1002,12 @@ fn in_loop(
                     })?;
                 shared.received[*s].fetch_add(1, Ordering::Relaxed);
             }
-            Header::Welcome { nonce: n } if n == nonce => welcomed = true,
+            Header::Welcome { nonce: n } if n == greeting.nonce => greeting.welcomed = true,
             Header::Welcome { .. } | Header::Hello { .. } => {}
-            Header::Bye => return Ok(BridgeEnd::FarEnded),
+            Header::Bye => {
+                shared.far_over.store(true, Ordering::SeqCst);
+                return Ok(BridgeEnd::FarEnded);
+            }
         }
     }
 }

@@ -104,6 +104,13 @@ impl Endpoint {
             // A connecting end may start before the listening one: it retries for ever.
             ("connect/timeout_ms", "-1".to_owned()),
             ("connect/exit_on_failure", "false".to_owned()),
+            // And after a lost link (a cut, the far end restarted) it tries again every
+            // 100 ms at first, at most every second (Zenoh's default waits 1 s, then up to 4).
+            (
+                "connect/retry",
+                "{ period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2.0 }"
+                    .to_owned(),
+            ),
         ] {
             c.insert_json5(key, &value)
                 .map_err(|e| format!("zenoh config `{key}`: {e}"))?;

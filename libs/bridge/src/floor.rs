@@ -4,13 +4,18 @@
 //!
 //! The pong end listens and echoes each sample from the ping key onto the pong key; the ping
 //! end connects, sends one sample at a time, stamped, and times its round trip. A one-way
-//! figure is half a round trip.
+//! figure is half a round trip. Both ends wait for a sample as a bridge's receiving end does
+//! (`AGP_WAIT`'s strategy: by default polling for 200 us after the last sample, then
+//! blocking).
 
 use std::time::{Duration, Instant};
 
 use zenoh::Wait;
 use zenoh::qos::CongestionControl;
 
+use agp_runtime::WaitStrategy;
+
+use crate::bridge::next_sample;
 use crate::endpoint::Endpoint;
 use crate::tls::TlsKeys;
 
@@ -79,9 +84,12 @@ pub fn floor_pong(
         .with(zenoh::handlers::FifoChannel::new(64))
         .wait()
         .map_err(zerr)?;
+    let wait = WaitStrategy::from_env();
+    let mut last = Instant::now();
     while !stop() {
-        match pings.recv_timeout(Duration::from_millis(20)) {
+        match next_sample(&pings, wait, last.elapsed()) {
             Ok(Some(sample)) => {
+                last = Instant::now();
                 let bytes = sample.payload().to_bytes();
                 if bytes.is_empty() {
                     break;
@@ -136,6 +144,7 @@ pub fn floor_ping(
     }
     // Drain late answers of the start-up pings.
     while let Ok(Some(_)) = pongs.try_recv() {}
+    let wait = WaitStrategy::from_env();
     let mut one_way: Vec<u64> = Vec::with_capacity(1 << 20);
     let timed = Duration::from_secs_f64(seconds.max(0.1));
     let mut timed_from: Option<Instant> = None;
@@ -144,8 +153,10 @@ pub fn floor_ping(
         let sent = Instant::now();
         send(seq, &mut payload)?;
         // Answers carry the sequence number; a late start-up answer is skipped.
+        let waiting = Instant::now();
         loop {
-            match pongs.recv_timeout(FLOOR_TIMEOUT) {
+            match next_sample(&pongs, wait, sent.elapsed()) {
+                Ok(None) if waiting.elapsed() < FLOOR_TIMEOUT => {}
                 Ok(Some(s)) => {
                     let b = s.payload().to_bytes();
                     let got = b

@@ -57,6 +57,24 @@ pub(crate) struct BridgeArgs {
     /// The epoch the robot side's forwarded commands carry (`agp up` sets it).
     #[arg(long, env = "AGP_EPOCH", default_value_t = 0)]
     epoch: u64,
+    /// Seconds the far end may be gone (a link cut, its bridge restarting) once it had
+    /// joined, before this end gives up and exits 3 saying so; a far end that never joined
+    /// is waited for as long as it takes.
+    #[arg(long, env = "AGP_BRIDGE_FAR_TIMEOUT_S", default_value_t = agp_bridge::FAR_TIMEOUT.as_secs_f64(), value_parser = far_timeout_s)]
+    far_timeout_s: f64,
+}
+
+/// Exit status of a bridge whose far end went away without a word.
+const EXIT_FAR_GONE: u8 = 3;
+
+/// `--far-timeout-s`: 0.1 s to a day.
+fn far_timeout_s(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if (0.1..=86_400.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not between 0.1 and 86400 s"))
+    }
 }
 
 /// `agp bridge`'s subcommands.
@@ -284,6 +302,10 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
         key,
         node_name: format!("bridge-{}", side.name()),
         wait: WaitStrategy::from_env(),
+        far_timeout: std::time::Duration::from_secs_f64(args.far_timeout_s),
+        // `agp up` gives every child its clock; by hand, lockstep is the default clock.
+        redeliver_command: std::env::var("AGP_CLOCK").as_deref().unwrap_or("lockstep")
+            == "lockstep",
     };
     let names: Vec<&str> = config.topics.iter().map(|t| t.name).collect();
     let report = run_bridge(&instance, &config, || {
@@ -307,9 +329,13 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
     })
     .with_context(|| format!("bridge of instance `{}`", instance_name))?;
     let why = match report.end {
-        BridgeEnd::FarEnded => "the far end stopped",
-        BridgeEnd::Stopped => "stopped",
-        BridgeEnd::InstanceDown => "the instance went down",
+        BridgeEnd::FarEnded => "the far end stopped".to_owned(),
+        BridgeEnd::Stopped => "stopped".to_owned(),
+        BridgeEnd::InstanceDown => "the instance went down".to_owned(),
+        BridgeEnd::FarGone(d) => format!(
+            "the far end is gone: no peer on the link for {:.1} s, and it never said it stopped",
+            d.as_secs_f64()
+        ),
     };
     println!("agp: bridge of instance `{}` ended: {why}", instance_name);
     for (name, sent, received) in &report.topics {
@@ -320,6 +346,15 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
             "  commands and resets not forwarded: {} of an inactive epoch, {} without their token",
             report.stale, report.refused
         );
+    }
+    if report.far_lost > 0 {
+        println!("  the far end was lost {} time(s)", report.far_lost);
+    }
+    if let BridgeEnd::FarGone(_) = report.end {
+        eprintln!(
+            "agp: error: bridge of instance `{instance_name}`: {why} (killed, or its computer or the link down)"
+        );
+        return Ok(EXIT_FAR_GONE);
     }
     Ok(0)
 }

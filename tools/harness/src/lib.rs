@@ -5,7 +5,8 @@
 //! process by `in_process`), the judge that scores a task by ground truth (`evaluation`),
 //! `agp probe` (`probe`), the learning benchmark against the physics library
 //! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
-//! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`), and
+//! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`, and `link_proxy`,
+//! which cuts a bridge's link and restores it), and
 //! `side_by_side`, which spreads independent benchmark work over the cores, and `stop`, how a
 //! bench stops on a signal (partial JSON, no file left) and sweeps what dead benches left.
 //!
@@ -22,6 +23,7 @@ pub mod evaluation;
 pub mod hop;
 pub mod in_process;
 pub mod learn_bench;
+pub mod link_proxy;
 pub mod learn_curve;
 pub mod math;
 pub mod pipeline;

@@ -25,6 +25,8 @@ pub fn config(side: Side, endpoint: Endpoint, link: &str, epoch: u64, token: u64
         key: None,
         node_name: format!("bridge-{}", side.name()),
         wait: WaitStrategy::Block,
+        far_timeout: agp_bridge::FAR_TIMEOUT,
+        redeliver_command: false,
     }
 }
 
