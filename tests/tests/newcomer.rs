@@ -3,10 +3,10 @@
 //! at start-up, and the exit status of an instance already up.
 //!
 //! Not here: the robot side of a bridge whose far planner failed before a task exits 1
-//! (`up.rs`, `report_end`). A test of it passed alone but hung once in five under load: when
-//! the planner's side stops before its bridge's sending half saw the far end's hello, it
-//! sends no `bye`, and the robot side waits for a far end that is gone (issue 31's faults
-//! across the link).
+//! (`up.rs`, `report_end`), held by `bridge_faults.rs`. A test of it here hung once in five
+//! under load: a planner side that stopped before its bridge's sending half saw the far end's
+//! hello sent no `bye`. A bridge now always says `bye`, and a far end gone for its far
+//! timeout ends the other side.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -4,9 +4,13 @@
 //! Runs cycle through three phases: the learning phase (lockstep, a few trials per alpha,
 //! its verdict the saved AG file), the placement task (lockstep, the estimator serving an
 //! AG file learned once by `agp bench learn` at the start, its verdict the judge's) and a
-//! long-running session on the realtime clock (physics and the estimator reading every
-//! frame until `agp down`: it stands in for a live session until live sessions exist; it
-//! has no planner, since every planner mode refuses the realtime clock). Into each run go
+//! live session on the realtime clock (the planner serving goals, `--mode serve`, pursuing
+//! one `agp goal`; its verdict the goal reached, or ended by the planner with its reason,
+//! then `agp down`). Then the bridge phase: placements split over two instances joined by
+//! `agp bridge` through a TCP proxy, with faults across the link (`kill -9` and SIGSTOP of
+//! the far bridge and of the far supervisor, the link cut then restored); their verdict the
+//! judge's, every step applied once (physics's step log) and no step applied while the link
+//! was cut. Into each run go
 //! several faults, drawn from a shuffled deck (seeded): `kill -9` of each child, SIGSTOP
 //! then SIGCONT after a random pause of each child and of the supervisor, and `kill -9` of
 //! the supervisor followed by a fresh `agp up` of the same instance, which must clean what
@@ -30,6 +34,7 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use agp_affordance::AffordanceGradient;
+use agp_harness::link_proxy::LinkProxy;
 use agp_harness::pipeline::{
     Bins, LaunchSpec, Phase, Session, Status, StepCounter, instance_files, is_interrupt,
     last_line_with, reap_children, signal, sleep_checked, step_log_path,
@@ -80,6 +85,39 @@ struct Args {
     /// Run the benchmark phase only (no fault campaign).
     #[arg(long)]
     bench_signals_only: bool,
+    /// The bridge phase, after the three phases of one instance: this many faults across a
+    /// bridge's link, into placements split over two instances (the planner's side reached
+    /// through a TCP proxy): `kill -9` and SIGSTOP of the far bridge and of the far
+    /// supervisor, and the link cut then restored. 0 skips the phase.
+    #[arg(long, default_value_t = 200)]
+    bridge_faults: u32,
+    /// Run the bridge phase only.
+    #[arg(long, conflicts_with = "bench_signals_only")]
+    bridge_only: bool,
+    /// The phases of one instance to cycle through, comma-separated: learn, place, live.
+    #[arg(long, default_value = "learn,place,live", value_parser = parse_phases)]
+    phases: PhaseList,
+}
+
+/// The phases `--phases` names, in the order given.
+#[derive(Debug, Clone)]
+struct PhaseList(Vec<Phase>);
+
+fn parse_phases(s: &str) -> Result<PhaseList, String> {
+    let mut v = Vec::new();
+    for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        let p = Phase::ALL
+            .into_iter()
+            .find(|p| p.as_str() == name)
+            .ok_or_else(|| format!("unknown phase `{name}`: learn, place or live"))?;
+        if !v.contains(&p) {
+            v.push(p);
+        }
+    }
+    if v.is_empty() {
+        return Err("name at least one phase: learn, place, live".to_owned());
+    }
+    Ok(PhaseList(v))
 }
 
 /// The most restarts a launch file may give a child (`agp`'s own limit is 1000).
@@ -156,7 +194,7 @@ impl FaultKind {
     fn applies_to(self, phase: Phase) -> bool {
         self.target
             .child_name()
-            .is_none_or(|c| phase.children().contains(&c))
+            .is_none_or(|c| children(phase).contains(&c))
     }
 }
 
@@ -272,7 +310,7 @@ impl<'a> Run<'a> {
 
     /// Whether the status shows every child running, physics publishing (realtime).
     fn all_back(&self, s: &Status) -> bool {
-        s.all_running(self.phase.children()) && self.physics_publishes(s)
+        s.all_running(children(self.phase)) && self.physics_publishes(s)
     }
 
     /// Waits until `back` holds in a status and then (lockstep) physics's step log grows;
@@ -392,7 +430,7 @@ impl Campaign {
             ag_file: Some(&self.ag_file),
             max_restarts: self.args.faults_per_run.saturating_mul(4).min(MAX_RESTARTS),
         };
-        let launch = spec.write(&self.bins, &dir)?;
+        let launch = write_launch(&spec, &self.bins, &dir, &self.ag_file)?;
         let bins = self.bins.clone();
         let mut run = Run::start(&bins, phase, &instance, launch)?;
         let recovery = Duration::from_secs_f64(self.args.recovery_timeout_s);
@@ -419,6 +457,10 @@ impl Campaign {
             )),
             Back::Never(what) => Some(format!("never started: {what}")),
         };
+        let mut goal_end = None;
+        if lost.is_none() && phase == Phase::Live {
+            lost = queue_goal(&run).err().map(|e| format!("{e:#}"));
+        }
         let mut skips = 0;
         while lost.is_none() && record.faults < budget && run.ended().is_none() {
             let gap = self.rng.range(0.1, 1.0);
@@ -458,8 +500,12 @@ impl Campaign {
         // brought down as a user would.
         if lost.is_none() {
             self.progress(index, phase, "to the run's end");
-            if phase == Phase::Live && run.ended().is_none() && !run.session.down()? {
-                record.note = "`agp down` failed".to_owned();
+            if phase == Phase::Live && run.ended().is_none() {
+                self.progress(index, phase, "the goal's end");
+                goal_end = await_goal(&mut run, Duration::from_secs_f64(self.args.run_timeout_s))?;
+                if !run.session.down()? {
+                    record.note = "`agp down` failed".to_owned();
+                }
             }
             let timeout = Duration::from_secs_f64(self.args.run_timeout_s);
             let end = Instant::now() + timeout;
@@ -490,7 +536,7 @@ impl Campaign {
                 &mut record.note,
             )),
             Phase::Place => Some(check_placed(&dir, &record.instance, &mut record.note)),
-            Phase::Live => None,
+            Phase::Live => Some(check_goal(goal_end.as_ref(), &mut record.note)),
         };
         if let Some(why) = lost {
             if !record.note.is_empty() {
@@ -611,6 +657,116 @@ impl Campaign {
         record.pause_ms = Some(pause.as_secs_f64() * 1e3);
         Ok(Instant::now())
     }
+}
+
+/// The children a run of `phase` has: the live session's planner serves goals.
+fn children(phase: Phase) -> &'static [&'static str] {
+    match phase {
+        Phase::Live => &["physics", "estimator", "planner"],
+        p => p.children(),
+    }
+}
+
+/// The goal each live session pursues: the triangle where it starts, so the planner has to
+/// find it on the realtime clock (circling it on the frames physics publishes at 640 Hz of
+/// wall time, steering round it by commands that must keep up) and judge that it is there.
+const LIVE_GOAL: [&str; 3] = ["0", "0", "0"];
+
+/// Writes the run's launch file: the pipeline's, and for a live session a planner serving
+/// goals (`--mode serve`) beside an estimator serving `ag` (`pipeline.rs`'s live run, which
+/// `bench-soak` keeps as it is, has neither).
+fn write_launch(spec: &LaunchSpec<'_>, bins: &Bins, dir: &Path, ag: &Path) -> Result<PathBuf> {
+    if spec.phase != Phase::Live {
+        return spec.write(bins, dir);
+    }
+    let text = spec.text(bins, dir)?;
+    let estimator = format!("exec = \"{}\"\n", bins.path("agp-estimator").display());
+    let restart = format!(
+        "restart = {{ policy = \"on-failure\", max_restarts = {}, backoff_ms = 10 }}\nstop_grace_ms = 1000\n",
+        spec.max_restarts
+    );
+    if !text.contains(&estimator) {
+        bail!("the live session's launch file names no estimator");
+    }
+    let text = text.replace(
+        &estimator,
+        &format!("{estimator}args = [\"--load\", \"{}\"]\n", ag.display()),
+    ) + &format!(
+        "[[process]]\nname = \"planner\"\nexec = \"{}\"\nargs = [\"--mode\", \"serve\", \"--planner\", \"affordance\"]\n{restart}",
+        bins.path("agp-planner").display()
+    );
+    let path = dir.join("launch.toml");
+    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
+/// `agp goal --instance NAME --place LIVE_GOAL` on a live session.
+fn queue_goal(run: &Run<'_>) -> Result<()> {
+    let s = &run.session;
+    let out = s
+        .bins
+        .agp(&s.dir)
+        .args(["goal", "--instance", &s.instance, "--place"])
+        .args(LIVE_GOAL)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .output()
+        .context("cannot run `agp goal`")?;
+    if !out.status.success() {
+        bail!(
+            "`agp goal` failed: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(())
+}
+
+/// The goal of a live session as `agp status --json` shows it, once it is done (at most
+/// `timeout`); `None` when it is not.
+fn await_goal(run: &mut Run<'_>, timeout: Duration) -> Result<Option<Value>> {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        if run.ended().is_some() {
+            return Ok(None);
+        }
+        let s = &run.session;
+        let out = s
+            .bins
+            .agp(&s.dir)
+            .args(["status", "--instance", &s.instance, "--json"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .output()
+            .context("cannot run `agp status`")?;
+        let goal = serde_json::from_slice::<Value>(&out.stdout)
+            .ok()
+            .map(|v| v["goals"][0].clone());
+        if let Some(g) = goal.filter(|g| g["state"] == "done") {
+            return Ok(Some(g));
+        }
+        sleep_checked(Duration::from_millis(500))?;
+    }
+    Ok(None)
+}
+
+/// The live session's verdict: its goal reached, or ended by the planner with its reason
+/// (`lost`, with the object not found); not done by the run's end is wrong.
+fn check_goal(goal: Option<&Value>, note: &mut String) -> bool {
+    let Some(g) = goal else {
+        *note = "the goal was not done by the run's end".to_owned();
+        return false;
+    };
+    let end = g["end"].as_str().unwrap_or_default();
+    if g["success"] == true {
+        *note = format!(
+            "goal reached ({:.1} mm, {:.1} deg)",
+            g["position_error_mm"].as_f64().unwrap_or(f64::NAN),
+            g["orientation_error_deg"].as_f64().unwrap_or(f64::NAN)
+        );
+        return true;
+    }
+    *note = format!("goal not reached, ended `{end}`");
+    !end.is_empty()
 }
 
 /// ": <the supervisor's last error line>" for notes, or nothing.
@@ -736,6 +892,627 @@ fn learn_ag(bins: &Bins, out: &Path) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// A fault of the bridge phase: what happens to the far end of the link, seen from the
+/// robot's side (physics, the estimator and the judge run there; the planner runs beyond
+/// the link).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum LinkFault {
+    /// `kill -9` of the planner side's bridge (its supervisor restarts it).
+    KillFarBridge,
+    /// SIGSTOP, a random pause, SIGCONT of the planner side's bridge.
+    StopFarBridge,
+    /// `kill -9` of the planner side's supervisor (its bridge and planner die with it),
+    /// then a fresh `agp up` of it.
+    KillFarSupervisor,
+    /// SIGSTOP, a random pause, SIGCONT of the planner side's supervisor.
+    StopFarSupervisor,
+    /// The link cut (the proxy closes every connection and refuses new ones) for a random
+    /// pause, then restored.
+    Cut,
+}
+
+impl LinkFault {
+    const ALL: [LinkFault; 5] = [
+        LinkFault::KillFarBridge,
+        LinkFault::StopFarBridge,
+        LinkFault::KillFarSupervisor,
+        LinkFault::StopFarSupervisor,
+        LinkFault::Cut,
+    ];
+
+    fn label(self) -> &'static str {
+        match self {
+            LinkFault::KillFarBridge => "kill -9 far bridge",
+            LinkFault::StopFarBridge => "stop/cont far bridge",
+            LinkFault::KillFarSupervisor => "kill -9 far supervisor, up again",
+            LinkFault::StopFarSupervisor => "stop/cont far supervisor",
+            LinkFault::Cut => "link cut, restored",
+        }
+    }
+}
+
+/// One fault of the bridge phase and what came of it.
+#[derive(Debug, Clone)]
+struct LinkFaultRecord {
+    run: usize,
+    kind: LinkFault,
+    at_s: f64,
+    /// The pause (stop to continue, cut to restore), ms.
+    pause_ms: Option<f64>,
+    survived: bool,
+    /// The fault's end (kill, SIGCONT, restore) to physics stepping again, ms.
+    recovery_ms: Option<f64>,
+    /// Steps physics applied while the link was cut, from 100 ms after the cut (what was
+    /// already on its way) to the restore: nothing may drive the robot meanwhile.
+    steps_while_cut: Option<u64>,
+    note: String,
+}
+
+/// One run of the bridge phase: a placement split over two instances.
+#[derive(Debug, Clone)]
+struct LinkRunRecord {
+    index: usize,
+    robot: String,
+    planner: String,
+    faults: u32,
+    /// `agp up` of the planner side (more than one when its supervisor was killed).
+    planner_ups: u32,
+    /// Both supervisors exited with status 0.
+    completed: bool,
+    /// The judge (robot side) says placed.
+    placed: bool,
+    /// Physics's step log: every step applied exactly once.
+    steps_once: bool,
+    steps: u64,
+    exits: (Option<i32>, Option<i32>),
+    files_left: usize,
+    wall_s: f64,
+    note: String,
+}
+
+/// A placement split over two instances joined by `agp bridge` through a proxy that can
+/// cut the link: the robot side (physics with its step log, the estimator serving the AG
+/// file, the bridge listening) and the planner side (the bridge connecting through the
+/// proxy, the placing planner).
+struct LinkRun<'a> {
+    robot: Session<'a>,
+    planner: Session<'a>,
+    proxy: LinkProxy,
+    steps: StepCounter,
+    started: Instant,
+    planner_ups: u32,
+}
+
+/// The far timeout of the robot side's bridge in the bridge phase: far beyond any fault's
+/// recovery, so a fault the link rides out never ends the run.
+const LINK_FAR_TIMEOUT_S: u32 = 60;
+
+/// The two launch files of a bridge run in `dir` (`robot/`, `planner/`).
+fn link_launches(
+    bins: &Bins,
+    dir: &Path,
+    names: (&str, &str),
+    ports: (u16, u16),
+    ag: &Path,
+    max_restarts: u32,
+) -> Result<(PathBuf, PathBuf)> {
+    let exec = |name: &str| format!("\"{}\"", bins.path(name).display());
+    let restart = format!(
+        "restart = {{ policy = \"on-failure\", max_restarts = {max_restarts}, backoff_ms = 10 }}\nstop_grace_ms = 3000\n"
+    );
+    let head = |name: &str| {
+        format!(
+            "instance = \"{name}\"\nscenario = \"triangle\"\nresults = \"results\"\n\n[clock]\nmode = \"lockstep\"\nrate_hz = 640\n\n"
+        )
+    };
+    let robot_dir = dir.join("robot");
+    let robot = head(names.0)
+        + &format!(
+            "[[process]]\nname = \"physics\"\nexec = {}\nargs = [\"--step-log\", \"{}\"]\n{restart}\n",
+            exec("agp-physics"),
+            step_log_path(&robot_dir).display()
+        )
+        + &format!(
+            "[[process]]\nname = \"estimator\"\nexec = {}\nargs = [\"--load\", \"{}\"]\n{restart}\n",
+            exec("agp-estimator"),
+            ag.display()
+        )
+        + &format!(
+            "[[process]]\nname = \"planner\"\nremote = {{ role = \"planner\", listen = \"tcp/127.0.0.1:{}\", insecure = true }}\nenv = {{ AGP_BRIDGE_FAR_TIMEOUT_S = \"{LINK_FAR_TIMEOUT_S}\" }}\nends_run = true\n",
+            ports.0
+        );
+    let planner = head(names.1)
+        + &format!(
+            "[[process]]\nname = \"robot\"\nremote = {{ role = \"robot\", connect = \"tcp/127.0.0.1:{}\", insecure = true }}\n{restart}\n",
+            ports.1
+        )
+        + &format!(
+            "[[process]]\nname = \"planner\"\nexec = {}\nargs = [\"--mode\", \"place\", \"--planner\", \"affordance\"]\n{restart}ends_run = true\n",
+            exec("agp-planner")
+        );
+    let mut paths = Vec::new();
+    for (sub, text) in [("robot", robot), ("planner", planner)] {
+        let d = dir.join(sub);
+        std::fs::create_dir_all(&d).with_context(|| format!("cannot create {}", d.display()))?;
+        let p = d.join("launch.toml");
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
+        paths.push(p);
+    }
+    Ok((paths[0].clone(), paths[1].clone()))
+}
+
+/// Whether physics's step log holds every step exactly once, in order; and how many.
+fn steps_once(path: &Path) -> (bool, u64) {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return (false, 0);
+    };
+    let steps: Vec<u64> = text
+        .lines()
+        .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+        .collect();
+    let ok = !steps.is_empty() && steps.windows(2).all(|w| w[1] == w[0] + 1);
+    (ok, steps.len() as u64)
+}
+
+impl LinkRun<'_> {
+    /// Both ends' exit codes once both exited.
+    fn ended(&mut self) -> Option<(Option<i32>, Option<i32>)> {
+        let a = self.robot.ended()?;
+        let b = self.planner.ended()?;
+        Some((a, b))
+    }
+
+    /// The placement ran out: the planner side ended with status 0.
+    fn placement_over(&mut self) -> bool {
+        self.planner.ended() == Some(Some(0))
+    }
+
+    /// Waits until the planner side shows `back` (if given), then until physics steps
+    /// again; the time from `since`. `Ok(None)` when the placement ran out meanwhile.
+    fn wait_steps(
+        &mut self,
+        since: Instant,
+        timeout: Duration,
+        back: Option<&dyn Fn(&Status) -> bool>,
+    ) -> Result<std::result::Result<Option<Duration>, String>> {
+        let deadline = since + timeout;
+        let mut at = back.is_none().then(|| self.steps.count());
+        loop {
+            sleep_checked(Duration::ZERO)?;
+            if self.placement_over() {
+                return Ok(Ok(None));
+            }
+            if let Some(code) = self.robot.ended() {
+                return Ok(Err(format!(
+                    "the robot side ended with status {code:?}{}",
+                    last_error(&self.robot.dir)
+                )));
+            }
+            if Instant::now() >= deadline {
+                return Ok(Err(match at {
+                    None => format!("the planner side not back within {timeout:?}"),
+                    Some(_) => format!("no physics step within {timeout:?}"),
+                }));
+            }
+            match (at, back) {
+                (None, Some(back)) => {
+                    if let Some(s) = self.planner.status()?
+                        && back(&s)
+                    {
+                        at = Some(self.steps.count());
+                    }
+                }
+                (Some(n), _) => {
+                    if self.steps.count() > n {
+                        return Ok(Ok(Some(since.elapsed())));
+                    }
+                }
+                (None, None) => unreachable!("`at` is set when there is no `back`"),
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+/// What the bridge phase keeps.
+struct LinkCampaign<'a> {
+    args: &'a Args,
+    bins: &'a Bins,
+    work: &'a Path,
+    ag_file: &'a Path,
+    rng: Rng,
+    deck: Vec<LinkFault>,
+    next: usize,
+    faults: Vec<LinkFaultRecord>,
+    runs: Vec<LinkRunRecord>,
+    started: Instant,
+}
+
+impl LinkCampaign<'_> {
+    fn draw(&mut self) -> LinkFault {
+        if self.next >= self.deck.len() {
+            for i in (1..self.deck.len()).rev() {
+                let j = (self.rng.next_u64() % (i as u64 + 1)) as usize;
+                self.deck.swap(i, j);
+            }
+            self.next = 0;
+        }
+        self.next += 1;
+        self.deck[self.next - 1]
+    }
+
+    /// One placement across the link with at most `budget` faults.
+    fn run(&mut self, index: usize, budget: u32) -> Result<()> {
+        let tag = format!("bf{}-{index:04}", std::process::id() % 100_000);
+        let names = (format!("{tag}r"), format!("{tag}p"));
+        for n in [&names.0, &names.1] {
+            if !instance_files(n)?.is_empty() {
+                bail!("instance `{n}` already has files; remove them or run again");
+            }
+        }
+        let dir = self.work.join(format!("link-{index:04}"));
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("a free port on the loopback")?
+            .port();
+        let proxy = LinkProxy::start(std::net::SocketAddr::from(([127, 0, 0, 1], port)))
+            .context("cannot start the link's proxy")?;
+        let max_restarts = self.args.faults_per_run.saturating_mul(4).min(MAX_RESTARTS);
+        let (robot_launch, planner_launch) = link_launches(
+            self.bins,
+            &dir,
+            (&names.0, &names.1),
+            (port, proxy.port()),
+            self.ag_file,
+            max_restarts,
+        )?;
+        let robot = Session::start(self.bins, &names.0, robot_launch)?;
+        let planner = Session::start(self.bins, &names.1, planner_launch)?;
+        let mut run = LinkRun {
+            steps: StepCounter::new(step_log_path(&dir.join("robot"))),
+            robot,
+            planner,
+            proxy,
+            started: Instant::now(),
+            planner_ups: 1,
+        };
+        eprintln!(
+            "[{}/{}] {:.0} s, bridge run {index}: starting",
+            self.faults.len(),
+            self.args.bridge_faults,
+            self.started.elapsed().as_secs_f64()
+        );
+        let mut lost = match run.wait_steps(Instant::now(), Duration::from_secs(120), None)? {
+            Ok(_) => None,
+            Err(why) => Some(format!("never started: {why}")),
+        };
+        let mut faults = 0;
+        while lost.is_none() && faults < budget && !run.placement_over() {
+            sleep_checked(Duration::from_secs_f64(self.rng.range(0.1, 1.0)))?;
+            if run.placement_over() {
+                break;
+            }
+            let kind = self.draw();
+            let Some(record) = self.inject(&mut run, index, kind)? else {
+                continue;
+            };
+            faults += 1;
+            if !record.survived {
+                lost = Some(format!("{}: {}", kind.label(), record.note));
+            }
+            self.faults.push(record);
+        }
+        let timeout = Duration::from_secs_f64(self.args.run_timeout_s);
+        let end = Instant::now() + timeout;
+        while run.ended().is_none() && Instant::now() < end {
+            sleep_checked(Duration::from_millis(20))?;
+        }
+        let exits = run.ended().unwrap_or((run.robot.ended().flatten(), None));
+        if lost.is_none() && run.ended().is_none() {
+            lost = Some(format!("not ended {timeout:?} after its last fault"));
+        }
+        let (once, steps) = steps_once(&step_log_path(&dir.join("robot")));
+        let mut note = String::new();
+        let placed = check_placed(&dir.join("robot"), &names.0, &mut note);
+        let completed = exits == (Some(0), Some(0));
+        if lost.is_none() && !completed {
+            lost = Some(format!(
+                "ended with status {exits:?}{}{}",
+                last_error(&dir.join("robot")),
+                last_error(&dir.join("planner"))
+            ));
+        }
+        let files_left = run.planner.shut() + run.robot.shut();
+        if let Some(why) = lost {
+            note = if note.is_empty() {
+                why
+            } else {
+                format!("{why}; {note}")
+            };
+        }
+        self.runs.push(LinkRunRecord {
+            index,
+            robot: names.0,
+            planner: names.1,
+            faults,
+            planner_ups: run.planner_ups,
+            completed,
+            placed,
+            steps_once: once,
+            steps,
+            exits,
+            files_left,
+            wall_s: run.started.elapsed().as_secs_f64(),
+            note,
+        });
+        Ok(())
+    }
+
+    /// Injects `kind`; `None` when the far bridge is not running just now.
+    fn inject(
+        &mut self,
+        run: &mut LinkRun<'_>,
+        index: usize,
+        kind: LinkFault,
+    ) -> Result<Option<LinkFaultRecord>> {
+        let timeout = Duration::from_secs_f64(self.args.recovery_timeout_s);
+        let Some(before) = run.planner.status()? else {
+            return Ok(None);
+        };
+        let Some(bridge) = before.child("robot").filter(|c| c.running()).cloned() else {
+            return Ok(None);
+        };
+        let Some(pid) = bridge.pid.filter(|&p| self.bins.owns(p)) else {
+            return Ok(None);
+        };
+        let mut record = LinkFaultRecord {
+            run: index,
+            kind,
+            at_s: run.started.elapsed().as_secs_f64(),
+            pause_ms: None,
+            survived: false,
+            recovery_ms: None,
+            steps_while_cut: None,
+            note: String::new(),
+        };
+        let all = |s: &Status| s.all_running(&["robot", "planner"]);
+        let pause = Duration::from_secs_f64(self.rng.range(0.2, 2.0));
+        let back = match kind {
+            LinkFault::KillFarBridge => {
+                signal(pid, libc::SIGKILL);
+                let t0 = Instant::now();
+                let restarted = move |s: &Status| {
+                    s.child("robot")
+                        .is_some_and(|c| c.running() && c.pid != Some(pid))
+                };
+                run.wait_steps(t0, timeout, Some(&restarted as &dyn Fn(&Status) -> bool))?
+            }
+            LinkFault::StopFarBridge | LinkFault::StopFarSupervisor => {
+                let target = if kind == LinkFault::StopFarBridge {
+                    pid
+                } else {
+                    run.planner.sup().pid()
+                };
+                run.planner.stopped = Some(target);
+                signal(target, libc::SIGSTOP);
+                let slept = sleep_checked(pause);
+                signal(target, libc::SIGCONT);
+                run.planner.stopped = None;
+                slept?;
+                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+                run.wait_steps(
+                    Instant::now(),
+                    timeout,
+                    Some(&all as &dyn Fn(&Status) -> bool),
+                )?
+            }
+            LinkFault::KillFarSupervisor => {
+                let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
+                let t0 = Instant::now();
+                run.planner.sup().signal(libc::SIGKILL);
+                run.planner.sup().wait_exit(Duration::from_secs(10));
+                let outlived = reap_children(self.bins, &children, Duration::from_secs(10));
+                if outlived > 0 {
+                    record.note = format!("{outlived} child(ren) outlived the killed supervisor; ");
+                }
+                run.planner.up_again()?;
+                run.planner_ups += 1;
+                run.wait_steps(t0, timeout, Some(&all as &dyn Fn(&Status) -> bool))?
+            }
+            LinkFault::Cut => {
+                run.proxy.cut();
+                let settle = Duration::from_millis(100);
+                sleep_checked(settle)?;
+                let from = run.steps.count();
+                let slept = sleep_checked(pause.saturating_sub(settle));
+                let to = run.steps.count();
+                run.proxy.restore();
+                slept?;
+                record.steps_while_cut = Some(to - from);
+                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+                if to > from {
+                    record.note = format!("{} step(s) applied while the link was cut; ", to - from);
+                }
+                run.wait_steps(Instant::now(), timeout, None)?
+            }
+        };
+        let clean = record.note.is_empty();
+        match back {
+            Ok(Some(d)) => {
+                record.survived = clean;
+                record.recovery_ms = Some(d.as_secs_f64() * 1e3);
+            }
+            Ok(None) => {
+                record.survived = clean;
+                record.note += "the placement ran out meanwhile, status 0";
+            }
+            Err(why) => record.note += &why,
+        }
+        Ok(Some(record))
+    }
+
+    fn json(&self) -> Value {
+        let runs: Vec<Value> = self
+            .runs
+            .iter()
+            .map(|r| {
+                json!({
+                    "run": r.index, "robot": r.robot, "planner": r.planner, "faults": r.faults,
+                    "planner_ups": r.planner_ups, "completed": r.completed, "placed": r.placed,
+                    "steps_once": r.steps_once, "steps": r.steps,
+                    "exit_robot": r.exits.0, "exit_planner": r.exits.1,
+                    "files_left": r.files_left, "wall_s": r.wall_s, "note": r.note,
+                })
+            })
+            .collect();
+        let faults: Vec<Value> = self
+            .faults
+            .iter()
+            .map(|f| {
+                json!({
+                    "run": f.run, "fault": f.kind.label(), "at_s": f.at_s, "pause_ms": f.pause_ms,
+                    "survived": f.survived, "recovery_ms": f.recovery_ms,
+                    "steps_while_cut": f.steps_while_cut, "note": f.note,
+                })
+            })
+            .collect();
+        json!({
+            "faults_injected": self.faults.len(),
+            "faults_survived": self.faults.iter().filter(|f| f.survived).count(),
+            "runs": self.runs.len(),
+            "runs_completed": self.runs.iter().filter(|r| r.completed).count(),
+            "runs_placed": self.runs.iter().filter(|r| r.placed).count(),
+            "runs_every_step_once": self.runs.iter().filter(|r| r.steps_once).count(),
+            "files_left": self.runs.iter().map(|r| r.files_left).sum::<usize>(),
+            "steps_while_cut": self.faults.iter().filter_map(|f| f.steps_while_cut).sum::<u64>(),
+            "wall_s": self.started.elapsed().as_secs_f64(),
+            "fault_list": faults,
+            "run_list": runs,
+        })
+    }
+
+    fn missed(&self) -> Option<String> {
+        let not_survived = self.faults.iter().filter(|f| !f.survived).count();
+        let lost = self.runs.iter().filter(|r| !r.completed).count();
+        let wrong = self
+            .runs
+            .iter()
+            .filter(|r| !r.placed || !r.steps_once)
+            .count();
+        let files: usize = self.runs.iter().map(|r| r.files_left).sum();
+        (not_survived + lost + wrong + files > 0).then(|| {
+            format!(
+                "bridge phase: {not_survived} fault(s) not survived, {lost} run(s) lost, {wrong} not placed or a step lost or applied twice, {files} file(s) left"
+            )
+        })
+    }
+
+    fn print(&self) {
+        println!(
+            "bridge phase: {} faults across the link in {} runs, seed {}, {:.0} s wall (a placement split over two instances in lockstep, the planner's side beyond a TCP proxy that cuts the link)",
+            self.faults.len(),
+            self.runs.len(),
+            self.args.seed,
+            self.started.elapsed().as_secs_f64()
+        );
+        println!(
+            "{:<34} {:>8} {:>8} {:>14} {:>14} {:>10}",
+            "fault", "injected", "survived", "recovery p50", "recovery max", "cut steps"
+        );
+        for kind in LinkFault::ALL {
+            let of: Vec<&LinkFaultRecord> = self.faults.iter().filter(|f| f.kind == kind).collect();
+            let rec: Vec<f64> = of.iter().filter_map(|f| f.recovery_ms).collect();
+            let cut: Option<u64> =
+                (kind == LinkFault::Cut).then(|| of.iter().filter_map(|f| f.steps_while_cut).sum());
+            println!(
+                "{:<34} {:>8} {:>8} {:>11} ms {:>11} ms {:>10}",
+                kind.label(),
+                of.len(),
+                of.iter().filter(|f| f.survived).count(),
+                ms(median(&rec)),
+                ms(max(&rec)),
+                cut.map_or("-".to_owned(), |c| c.to_string())
+            );
+        }
+        let all: Vec<f64> = self.faults.iter().filter_map(|f| f.recovery_ms).collect();
+        println!(
+            "{:<34} {:>8} {:>8} {:>11} ms {:>11} ms",
+            "all",
+            self.faults.len(),
+            self.faults.iter().filter(|f| f.survived).count(),
+            ms(median(&all)),
+            ms(max(&all))
+        );
+        let j = self.json();
+        println!(
+            "runs {}: completed {}, placed {}, every step applied once {}, lost {}, files left {}",
+            j["runs"],
+            j["runs_completed"],
+            j["runs_placed"],
+            j["runs_every_step_once"],
+            self.runs.len() - self.runs.iter().filter(|r| r.completed).count(),
+            j["files_left"]
+        );
+        for f in self.faults.iter().filter(|f| !f.survived) {
+            println!(
+                "  NOT SURVIVED: run {} at {:.1} s: {}: {}",
+                f.run,
+                f.at_s,
+                f.kind.label(),
+                f.note
+            );
+        }
+        for r in self
+            .runs
+            .iter()
+            .filter(|r| !r.completed || !r.placed || !r.steps_once || r.files_left > 0)
+        {
+            println!(
+                "  RUN {} (`{}`/`{}`, {} fault(s), {} up(s) of the planner side, exits {:?}, {} steps, {} file(s) left): {}",
+                r.index,
+                r.robot,
+                r.planner,
+                r.faults,
+                r.planner_ups,
+                r.exits,
+                r.steps,
+                r.files_left,
+                r.note
+            );
+        }
+    }
+}
+
+/// The bridge phase: `args.bridge_faults` faults across the link, into placements split
+/// over two instances.
+fn bridge_phase<'a>(
+    args: &'a Args,
+    bins: &'a Bins,
+    work: &'a Path,
+    ag_file: &'a Path,
+) -> Result<LinkCampaign<'a>> {
+    let mut c = LinkCampaign {
+        args,
+        bins,
+        work,
+        ag_file,
+        rng: Rng::stream(args.seed, 31),
+        deck: LinkFault::ALL.to_vec(),
+        next: usize::MAX,
+        faults: Vec::new(),
+        runs: Vec::new(),
+        started: Instant::now(),
+    };
+    let mut index = 0;
+    while (c.faults.len() as u32) < args.bridge_faults {
+        let left = args.bridge_faults - c.faults.len() as u32;
+        c.run(index, left.min(args.faults_per_run))?;
+        index += 1;
+    }
+    c.print();
+    Ok(c)
+}
+
 fn main() {
     let args = Args::parse();
     install_shutdown_handler();
@@ -778,6 +1555,16 @@ fn campaign(args: Args) -> Result<Option<String>> {
         }
         return Ok(report.missed());
     }
+    if args.bridge_only {
+        let link = bridge_phase(&args, &bins, work.path(), &ag_file)?;
+        if let Some(path) = &args.json {
+            let text = serde_json::to_string_pretty(&json!({ "bridge": link.json() }))
+                .context("cannot format the JSON")?;
+            std::fs::write(path, text + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        return Ok(link.missed());
+    }
     let mut c = Campaign {
         rng: Rng::new(args.seed),
         decks: Phase::ALL.into_iter().map(|p| (p, Deck::new(p))).collect(),
@@ -795,7 +1582,8 @@ fn campaign(args: Args) -> Result<Option<String>> {
         if left == 0 {
             break Ok(());
         }
-        let phase = Phase::ALL[index % Phase::ALL.len()];
+        let phases = &c.args.phases.0;
+        let phase = phases[index % phases.len()];
         if let Err(e) = c.run(index, phase, left.min(c.args.faults_per_run)) {
             break Err(e);
         }
@@ -805,6 +1593,14 @@ fn campaign(args: Args) -> Result<Option<String>> {
         eprintln!();
     }
     let interrupted = result.as_ref().is_err_and(is_interrupt);
+    let link = if result.is_ok() && c.args.bridge_faults > 0 {
+        Some(bridge_phase(&c.args, &c.bins, c.work.path(), &c.ag_file)?)
+    } else {
+        None
+    };
+    let link_json = link.as_ref().map(LinkCampaign::json);
+    let link_missed = link.as_ref().and_then(LinkCampaign::missed);
+    drop(link);
     let signals = if result.is_ok() && c.args.bench_signals > 0 {
         Some(bench_signal_phase(
             &c.args,
@@ -823,6 +1619,9 @@ fn campaign(args: Args) -> Result<Option<String>> {
             if let Some(s) = &signals {
                 doc["bench_signals"] = s.json();
             }
+            if let Some(l) = &link_json {
+                doc["bridge"] = l.clone();
+            }
             let text = serde_json::to_string_pretty(&doc).context("cannot format the JSON")?;
             std::fs::write(path, text + "\n")
                 .with_context(|| format!("cannot write {}", path.display()))?;
@@ -840,6 +1639,7 @@ fn campaign(args: Args) -> Result<Option<String>> {
             )
         }),
         signals.and_then(|s| s.missed()),
+        link_missed,
     ];
     let missed: Vec<String> = missed.into_iter().flatten().collect();
     Ok((!missed.is_empty()).then(|| missed.join("; ")))
@@ -1219,8 +2019,24 @@ impl Report {
             c.bins.dir().display()
         );
         println!(
-            "live = physics on the realtime clock with the estimator reading every frame, until `agp down`: it stands in for a live session until live sessions exist (no planner: every planner mode refuses the realtime clock)"
+            "live = a live session on the realtime clock (physics at 640 Hz of wall time, the estimator serving the AG file, `agp-planner --mode serve`) pursuing the goal `agp goal --place {}` (the object where it starts: found by circling it, then judged there), then `agp down`; correct = the goal reached, or ended by the planner with its reason",
+            LIVE_GOAL.join(" ")
         );
+        let live: Vec<&RunRecord> = c.runs.iter().filter(|r| r.phase == Phase::Live).collect();
+        if !live.is_empty() {
+            println!(
+                "live goals: {} reached of {} ({})",
+                live.iter()
+                    .filter(|r| r.note.starts_with("goal reached"))
+                    .count(),
+                live.len(),
+                live.iter()
+                    .filter(|r| !r.note.starts_with("goal reached"))
+                    .map(|r| format!("run {}: {}", r.index, r.note))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+        }
         println!();
         println!(
             "{:<30} {:<6} {:>8} {:>8} {:>14} {:>14}",
@@ -1255,14 +2071,11 @@ impl Report {
         for phase in Phase::ALL {
             let runs: Vec<&RunRecord> = c.runs.iter().filter(|r| r.phase == phase).collect();
             let completed = runs.iter().filter(|r| r.completed).count();
-            let correct = if phase == Phase::Live {
-                "n/a".to_owned()
-            } else {
-                runs.iter()
-                    .filter(|r| r.correct == Some(true))
-                    .count()
-                    .to_string()
-            };
+            let correct = runs
+                .iter()
+                .filter(|r| r.correct == Some(true))
+                .count()
+                .to_string();
             let files: usize = runs.iter().map(|r| r.files_left).sum();
             println!(
                 "{:<6} {:>6} {:>9} {:>7} {:>5} {:>11}",
@@ -1399,7 +2212,7 @@ impl Report {
             "longest_recovery_fault": longest.map(|f| format!("{} ({}, run {})", f.kind.label(), f.phase.as_str(), f.run)),
             "wall_s": self.wall_s,
             "trials_per_alpha": c.args.trials_per_alpha,
-            "live_session": "physics on the realtime clock and the estimator reading every frame until `agp down`, standing in for a live session until live sessions exist",
+            "live_session": format!("a live session on the realtime clock with `agp-planner --mode serve` pursuing `agp goal --place {}`, then `agp down`", LIVE_GOAL.join(" ")),
             "by_fault_and_phase": table,
             "fault_list": faults,
             "run_list": runs,
