@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Every command of the README's ```sh blocks (and the examples' READMEs), run from a fresh
+"""Every command of the README's ```sh blocks (and of examples/*/README.md), run from a fresh
 clone after the first `agp up`: each exits as the README says.
 
     python3 tools/readme_commands.py --bin target/debug [--ag results/triangle.ag]
@@ -49,7 +49,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-READMES = ["README.md", "examples/python-planner/README.md"]
+# The README and every example's README (a new example's commands need rules too).
+READMES = ["README.md"] + sorted(str(p.relative_to(ROOT)) for p in ROOT.glob("examples/*/README.md"))
 TIMEOUT_S = 300  # a safety net per command; no check depends on it
 
 

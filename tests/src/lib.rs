@@ -2,7 +2,7 @@
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ChildStderr, ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
@@ -163,6 +163,80 @@ impl Finished {
             self.stderr
         );
     }
+
+    /// Panics, with everything the run printed, unless it exited with `code`.
+    #[track_caller]
+    pub fn assert_exit(&self, code: i32) {
+        assert_eq!(
+            self.status.code(),
+            Some(code),
+            "stdout:\n{}\nstderr:\n{}",
+            self.stdout,
+            self.stderr
+        );
+    }
+
+    /// Panics, showing stdout, unless stdout holds each of `needles`.
+    #[track_caller]
+    pub fn assert_stdout_says(&self, needles: &[&str]) {
+        assert_says("stdout", &self.stdout, needles);
+    }
+
+    /// Panics, showing stderr, unless stderr holds each of `needles`.
+    #[track_caller]
+    pub fn assert_stderr_says(&self, needles: &[&str]) {
+        assert_says("stderr", &self.stderr, needles);
+    }
+
+    /// How many lines of stdout hold `needle`.
+    pub fn stdout_lines_with(&self, needle: &str) -> usize {
+        self.stdout.lines().filter(|l| l.contains(needle)).count()
+    }
+}
+
+#[track_caller]
+fn assert_says(stream: &str, text: &str, needles: &[&str]) {
+    for needle in needles {
+        assert!(
+            text.contains(needle),
+            "`{needle}` missing from {stream}:\n{text}"
+        );
+    }
+}
+
+/// A launch file of instance `instance`, triangle, lockstep, running `processes` (TOML
+/// `[[process]]` entries, such as [`test_child`]'s): the process lines start at line 8.
+pub fn child_launch(instance: &str, processes: &str) -> String {
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n{processes}"
+    )
+}
+
+/// A `[[process]]` entry named `name` running `agp-test-child` (found next to `agp`) with
+/// `args` (TOML strings, comma-separated) and `extra` TOML lines.
+pub fn test_child(name: &str, args: &str, extra: &str) -> String {
+    format!("[[process]]\nname = \"{name}\"\nexec = \"agp-test-child\"\nargs = [{args}]\n{extra}\n")
+}
+
+/// Panics unless instance `name` has no file left (shared memory, iceoryx2 folder, lock
+/// file) after `run`, whose output the message shows.
+#[track_caller]
+pub fn assert_instance_clean(name: &str, run: &Finished) {
+    let instance = Instance::new(name).expect("a valid instance name");
+    assert_eq!(
+        count_instance_files(name),
+        0,
+        "files of `{name}` remain: {:?}\nstdout:\n{}\nstderr:\n{}",
+        instance.files(),
+        run.stdout,
+        run.stderr
+    );
+    let lock = instance
+        .root_dir()
+        .parent()
+        .expect("an instance's root has a parent")
+        .join(format!("{name}.lock"));
+    assert!(!lock.exists(), "the lock file of `{name}` remains");
 }
 
 /// A running `agp up`: its stdout read line by line as it comes (children share it),
@@ -185,16 +259,7 @@ impl AgpUp {
     /// Starts `agp <args...>` in `dir`, for a command that runs until stopped (such as
     /// `agp swap --watch`).
     pub fn spawn(dir: &Path, args: &[&str]) -> Self {
-        let mut child = Command::new(bin_path("agp"))
-            .args(args)
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start agp");
-        let out = child.stdout.take().expect("piped stdout");
-        let err = child.stderr.take().expect("piped stderr");
+        let (child, out, err) = spawn_agp(dir, args);
         let (line_tx, lines) = mpsc::channel();
         std::thread::spawn(move || {
             for line in BufReader::new(out).lines() {
@@ -391,9 +456,10 @@ impl Drop for DownOnPanic {
     }
 }
 
-/// Runs `agp <args...>` in `dir` to its end (at most `timeout`, a safety net).
+/// Starts `agp <args...>` in `dir` with stdin closed, and hands back its piped stdout and
+/// stderr.
 #[track_caller]
-pub fn run_agp(dir: &Path, args: &[&str], timeout: Duration) -> Finished {
+fn spawn_agp(dir: &Path, args: &[&str]) -> (Child, ChildStdout, ChildStderr) {
     let mut child = Command::new(bin_path("agp"))
         .args(args)
         .current_dir(dir)
@@ -402,9 +468,16 @@ pub fn run_agp(dir: &Path, args: &[&str], timeout: Duration) -> Finished {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start agp");
+    let out = child.stdout.take().expect("piped stdout");
+    let err = child.stderr.take().expect("piped stderr");
+    (child, out, err)
+}
+
+/// Runs `agp <args...>` in `dir` to its end (at most `timeout`, a safety net).
+#[track_caller]
+pub fn run_agp(dir: &Path, args: &[&str], timeout: Duration) -> Finished {
+    let (mut child, mut out, mut err) = spawn_agp(dir, args);
     let pid = child.id();
-    let mut out = child.stdout.take().expect("piped stdout");
-    let mut err = child.stderr.take().expect("piped stderr");
     let out_thread = std::thread::spawn(move || {
         let mut s = String::new();
         let _ = out.read_to_string(&mut s);

@@ -36,6 +36,16 @@ fn refused(dir: &Path, args: &[&str], words: &[&str]) -> Finished {
     run
 }
 
+/// `agp probe push --scenario <scenario> --angle-deg 0` in `dir`, refused saying `words`.
+#[track_caller]
+fn probe_refused(dir: &Path, scenario: &str, words: &[&str]) -> Finished {
+    refused(
+        dir,
+        &["probe", "push", "--scenario", scenario, "--angle-deg", "0"],
+        words,
+    )
+}
+
 fn make_fifo(path: &Path) {
     let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).expect("no NUL");
     // SAFETY: mkfifo(3) on a NUL-terminated path this test owns.
@@ -47,16 +57,9 @@ fn make_fifo(path: &Path) {
 fn probe_push_with_a_fifo_as_its_scenario_is_refused_instead_of_hanging() {
     let dir = tempfile::tempdir().expect("temp dir");
     make_fifo(&dir.path().join("pipe.toml"));
-    refused(
+    probe_refused(
         dir.path(),
-        &[
-            "probe",
-            "push",
-            "--scenario",
-            "pipe.toml",
-            "--angle-deg",
-            "0",
-        ],
+        "pipe.toml",
         &["pipe.toml", "not a regular file but a FIFO"],
     );
 }
@@ -65,16 +68,9 @@ fn probe_push_with_a_fifo_as_its_scenario_is_refused_instead_of_hanging() {
 fn probe_push_with_a_link_to_dev_zero_as_its_scenario_is_refused_without_reading_it() {
     let dir = tempfile::tempdir().expect("temp dir");
     std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.toml")).expect("symlink");
-    refused(
+    probe_refused(
         dir.path(),
-        &[
-            "probe",
-            "push",
-            "--scenario",
-            "zero.toml",
-            "--angle-deg",
-            "0",
-        ],
+        "zero.toml",
         &["zero.toml", "a character device"],
     );
 }
@@ -90,16 +86,9 @@ fn probe_push_with_a_scenario_whose_name_is_a_path_is_refused_with_its_line() {
          mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
     )
     .expect("write");
-    let run = refused(
+    let run = probe_refused(
         dir.path(),
-        &[
-            "probe",
-            "push",
-            "--scenario",
-            "escape.toml",
-            "--angle-deg",
-            "0",
-        ],
+        "escape.toml",
         &["escape.toml:1:", "not a plain name"],
     );
     assert_eq!(run.stderr.trim().lines().count(), 1, "{}", run.stderr);

@@ -6,48 +6,12 @@ use std::time::{Duration, Instant};
 
 use agp_runtime::Instance;
 use agp_tests::{
-    AgpUp, Finished, LaunchDir, count_instance_files, pid_in, process_is_gone, run_agp,
+    AgpUp, LaunchDir, assert_instance_clean as assert_clean, child_launch as launch,
+    count_instance_files, pid_in, process_is_gone, run_agp, test_child as child,
 };
 
 /// Safety net of every wait; the checks never depend on it.
 const TIMEOUT: Duration = Duration::from_secs(30);
-
-/// A launch file of instance `instance` running `processes` (TOML `[[process]]` entries).
-fn launch(instance: &str, processes: &str) -> String {
-    format!(
-        "instance = \"{instance}\"\nscenario = \"triangle\"\n\n[clock]\nmode = \"lockstep\"\n\n{processes}"
-    )
-}
-
-/// A `[[process]]` entry running `agp-test-child` (found next to `agp`) with `args`.
-fn child(name: &str, args: &str, extra: &str) -> String {
-    format!("[[process]]\nname = \"{name}\"\nexec = \"agp-test-child\"\nargs = [{args}]\n{extra}\n")
-}
-
-fn lock_file_of(name: &str) -> std::path::PathBuf {
-    let instance = Instance::new(name).expect("valid name");
-    instance
-        .root_dir()
-        .parent()
-        .expect("root has a parent")
-        .join(format!("{name}.lock"))
-}
-
-#[track_caller]
-fn assert_clean(name: &str, run: &Finished) {
-    assert_eq!(
-        count_instance_files(name),
-        0,
-        "files of `{name}` remain: {:?}\nstdout:\n{}\nstderr:\n{}",
-        Instance::new(name).expect("valid name").files(),
-        run.stdout,
-        run.stderr
-    );
-    assert!(
-        !lock_file_of(name).exists(),
-        "the lock file of `{name}` remains"
-    );
-}
 
 #[test]
 fn up_ends_when_an_ends_run_child_exits_0_and_leaves_no_file() {
@@ -65,24 +29,12 @@ fn up_ends_when_an_ends_run_child_exits_0_and_leaves_no_file() {
         .concat(),
     ));
     let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);
-    assert_eq!(
-        run.status.code(),
-        Some(0),
-        "stdout:\n{}\nstderr:\n{}",
-        run.stdout,
-        run.stderr
-    );
-    assert!(
-        run.stdout.contains("job: exited with status 0"),
-        "{}",
-        run.stdout
-    );
-    assert!(run.stdout.contains("server: stopped"), "{}", run.stdout);
-    assert!(
-        run.stdout.contains("run over: `job` finished it"),
-        "{}",
-        run.stdout
-    );
+    run.assert_exit(0);
+    run.assert_stdout_says(&[
+        "job: exited with status 0",
+        "server: stopped",
+        "run over: `job` finished it",
+    ]);
     assert_clean(name, &run);
 }
 
@@ -105,23 +57,11 @@ fn up_stops_every_child_on_sigint_exits_non_zero_and_leaves_no_file() {
     );
     up.signal(libc::SIGINT);
     let run = up.wait(TIMEOUT);
-    assert_eq!(
-        run.status.code(),
-        Some(130),
-        "stdout:\n{}\nstderr:\n{}",
-        run.stdout,
-        run.stderr
-    );
-    assert!(
-        run.stdout.contains("first: stopped: exited with status 0"),
-        "{}",
-        run.stdout
-    );
-    assert!(
-        run.stdout.contains("second: stopped: exited with status 0"),
-        "{}",
-        run.stdout
-    );
+    run.assert_exit(130);
+    run.assert_stdout_says(&[
+        "first: stopped: exited with status 0",
+        "second: stopped: exited with status 0",
+    ]);
     assert_clean(name, &run);
 }
 
@@ -142,18 +82,10 @@ fn a_child_ignoring_sigterm_is_killed_after_the_grace_period() {
         "SIGKILL must wait for the grace period"
     );
     assert_ne!(run.status.code(), Some(0));
-    assert!(
-        run.stdout
-            .contains("stubborn: still running 0.5 s after SIGTERM: SIGKILL"),
-        "{}",
-        run.stdout
-    );
-    assert!(
-        run.stdout
-            .contains("stubborn: stopped: was killed by SIGKILL"),
-        "{}",
-        run.stdout
-    );
+    run.assert_stdout_says(&[
+        "stubborn: still running 0.5 s after SIGTERM: SIGKILL",
+        "stubborn: stopped: was killed by SIGKILL",
+    ]);
     assert_clean(name, &run);
 }
 
@@ -173,27 +105,16 @@ fn an_on_failure_child_that_crashes_is_restarted_up_to_max_restarts_then_the_run
         .concat(),
     ));
     let run = AgpUp::start(&dir.launch(), &[]).wait(TIMEOUT);
-    assert_eq!(
-        run.status.code(),
-        Some(1),
-        "stdout:\n{}\nstderr:\n{}",
-        run.stdout,
-        run.stderr
-    );
-    let count = |needle: &str| run.stdout.lines().filter(|l| l.contains(needle)).count();
+    run.assert_exit(1);
+    let count = |needle: &str| run.stdout_lines_with(needle);
     assert_eq!(count("crasher: started"), 1, "{}", run.stdout);
     assert_eq!(count("crasher: restarted ("), 4, "{}", run.stdout);
     assert_eq!(count("crasher: exited with status 3"), 5, "{}", run.stdout);
     // Five crashed publishers on a topic that takes four: only possible if each dead one
     // was cleaned before the next started.
     assert_eq!(count("crasher: ready"), 5, "{}", run.stdout);
-    assert!(
-        run.stderr
-            .contains("process `crasher` exited with status 3 after 4 restart(s)"),
-        "{}",
-        run.stderr
-    );
-    assert!(run.stdout.contains("steady: stopped"), "{}", run.stdout);
+    run.assert_stderr_says(&["process `crasher` exited with status 3 after 4 restart(s)"]);
+    run.assert_stdout_says(&["steady: stopped"]);
     let starts = std::fs::read_to_string(dir.results().join("crasher.log")).expect("record");
     assert_eq!(starts.lines().count(), 5);
     assert_clean(name, &run);
@@ -238,18 +159,8 @@ fn children_of_a_killed_supervisor_die_and_the_next_up_cleans_their_files() {
         ),
     ));
     let run = AgpUp::start(&dir2.launch(), &[]).wait(TIMEOUT);
-    assert_eq!(
-        run.status.code(),
-        Some(0),
-        "stdout:\n{}\nstderr:\n{}",
-        run.stdout,
-        run.stderr
-    );
-    assert!(
-        run.stdout.contains("leftover file(s) of instance"),
-        "{}",
-        run.stdout
-    );
+    run.assert_exit(0);
+    run.assert_stdout_says(&["leftover file(s) of instance"]);
     assert_clean(name, &run);
 }
 
@@ -266,13 +177,7 @@ fn every_child_gets_its_context_in_the_environment() {
     );
     let dir = LaunchDir::new(&text);
     let run = AgpUp::start(&dir.launch(), &["--instance", name]).wait(TIMEOUT);
-    assert_eq!(
-        run.status.code(),
-        Some(0),
-        "stdout:\n{}\nstderr:\n{}",
-        run.stdout,
-        run.stderr
-    );
+    run.assert_exit(0);
     let results = dir.path().join("out");
     let record = std::fs::read_to_string(results.join("job.log")).expect("the child's record");
     for expected in [
@@ -303,15 +208,12 @@ fn a_second_up_of_a_live_instance_is_refused() {
 
     let dir2 = LaunchDir::new(&launch(name, &child("intruder", r#""--until-signal""#, "")));
     let second = run_agp(dir2.path(), &["up"], TIMEOUT);
-    assert_ne!(second.status.code(), Some(0));
-    assert!(
-        second.stderr.contains(&format!(
-            "instance `{name}` is already up under supervisor pid {}",
-            up.pid()
-        )),
-        "{}",
-        second.stderr
-    );
+    // Exit 2, as README, RELIABILITY and `agp up --help` say: nothing was started.
+    second.assert_exit(2);
+    second.assert_stderr_says(&[&format!(
+        "instance `{name}` is already up under supervisor pid {}",
+        up.pid()
+    )]);
     assert!(!second.stdout.contains("started"), "{}", second.stdout);
     assert!(
         !dir2.results().exists(),
@@ -320,33 +222,23 @@ fn a_second_up_of_a_live_instance_is_refused() {
 
     up.signal(libc::SIGTERM);
     let run = up.wait(TIMEOUT);
-    assert_eq!(run.status.code(), Some(143));
+    run.assert_exit(143);
     assert_clean(name, &run);
 }
 
-/// Runs `agp up` on a bad launch file and checks it is refused, naming the file and
+/// Runs `agp up` on a bad launch file and checks it is refused (exit 2), naming the file and
 /// `line` (when the fault has one), saying `reason`, and starting nothing.
 #[track_caller]
 fn assert_refused(name: &str, text: &str, line: Option<usize>, reason: &str) {
     let dir = LaunchDir::new(text);
     let run = run_agp(dir.path(), &["up"], TIMEOUT);
-    assert_ne!(run.status.code(), Some(0), "stdout:\n{}", run.stdout);
-    assert_ne!(run.status.code(), None, "agp must exit, not crash");
+    // Exit 2, a bad launch file (README, `agp up --help`), not a crash.
+    run.assert_exit(2);
     let place = match line {
         Some(l) => format!("launch.toml:{l}: "),
         None => "launch.toml: ".to_owned(),
     };
-    assert!(
-        run.stderr.contains(&place),
-        "`{place}` missing from:\n{}",
-        run.stderr
-    );
-    assert!(
-        run.stderr.contains(reason),
-        "`{reason}` missing from:\n{}",
-        run.stderr
-    );
-    assert!(run.stderr.contains("nothing was started"), "{}", run.stderr);
+    run.assert_stderr_says(&[&place, reason, "nothing was started"]);
     assert!(!run.stdout.contains("started"), "{}", run.stdout);
     assert!(
         !dir.results().exists(),
