@@ -6,7 +6,12 @@ import ctypes
 
 import pytest
 
-from agp.payloads import MIRRORS
+from agp.envs.pipeline_env import GroundTruth
+from agp.payloads import MIRRORS as PAYLOADS
+
+# The package's payload mirrors, and the ground truth that the Gymnasium environment's judge
+# (and nothing else in the package) reads.
+MIRRORS = {**PAYLOADS, "GroundTruth": GroundTruth}
 
 
 def test_every_rust_payload_has_a_mirror_and_every_mirror_a_rust_payload(rust_layouts):
