@@ -17,8 +17,8 @@ use agp_affordance::AffordanceGradient;
 use agp_planning::aim_point_at;
 use agp_shared_types::{
     ActiveEpoch, ControlRequest, ControlResponse, GRID_CELLS, Goal, GoalStatus, GradientGrid,
-    GridHeader, GridKind, GroundTruth, IrFrame, LearnEvent, MotorCommand, ObjectEstimate, Pose2, ProcessStatus,
-    PushChoice, PushRequest, StrangerStatus, Task, TimingHeader,
+    GridHeader, GridKind, GroundTruth, IrFrame, LearnEvent, MotorCommand, ObjectEstimate, Pose2,
+    ProcessStatus, PushChoice, PushRequest, StrangerStatus, Task, TimingHeader,
 };
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde_json::{Map, Value, json};
@@ -48,7 +48,11 @@ fn layouts() -> Value {
     layout!(out, Pose2, [x, y, theta]);
     layout!(out, TimingHeader, [trace_id, stamps_ns]);
     // The Gymnasium environment's judge reads it (python/src/agp/envs), the only Python reader.
-    layout!(out, GroundTruth, [step, sim_time_s, robot, object, contact, _pad]);
+    layout!(
+        out,
+        GroundTruth,
+        [step, sim_time_s, robot, object, contact, _pad]
+    );
     layout!(
         out,
         IrFrame,
