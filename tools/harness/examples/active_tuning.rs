@@ -18,6 +18,45 @@ fn parse<T: std::str::FromStr>(flag: &str, v: Option<String>) -> Result<T, Strin
     v.parse().map_err(|_| format!("`{flag}`: bad value `{v}`"))
 }
 
+/// Takes flag `a` (and its value from `args`) into the run's settings.
+fn apply(
+    a: &str,
+    args: &mut impl Iterator<Item = String>,
+    cfg: &mut LearnBenchConfig,
+    trials: &mut usize,
+    seeds: &mut Vec<u64>,
+    objects: &mut Vec<String>,
+) -> Result<(), String> {
+    match a {
+        "--protocol" => {
+            cfg.protocol = match args.next().as_deref() {
+                Some("paper") => TrialProtocol::Paper,
+                Some("active") => TrialProtocol::Active,
+                other => return Err(format!("--protocol: `{other:?}`")),
+            }
+        }
+        "--trials" => *trials = parse(a, args.next())?,
+        "--eval" => cfg.eval_pushes = parse(a, args.next())?,
+        "--spread-weight" => cfg.active.spread_weight = parse(a, args.next())?,
+        "--prior-weight" => cfg.active.prior_weight = parse(a, args.next())?,
+        "--reach-mm" => cfg.active.reach_m = parse::<f64>(a, args.next())? * 1e-3,
+        "--starts" => cfg.active.starts_per_alpha = parse(a, args.next())?,
+        "--seeds" => {
+            let v: String = parse(a, args.next())?;
+            let (lo, hi) = v.split_once('-').ok_or("--seeds: FIRST-LAST")?;
+            let lo: u64 = lo.parse().map_err(|_| "--seeds")?;
+            let hi: u64 = hi.parse().map_err(|_| "--seeds")?;
+            *seeds = (lo..=hi).collect();
+        }
+        "--objects" => {
+            let v: String = parse(a, args.next())?;
+            *objects = v.split(',').map(String::from).collect();
+        }
+        other => return Err(format!("unknown argument `{other}`")),
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let mut cfg = LearnBenchConfig::default();
     let mut trials = 90usize;
@@ -27,38 +66,14 @@ fn main() -> ExitCode {
         .to_vec();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
-        let r: Result<(), String> = (|| {
-            match a.as_str() {
-                "--protocol" => {
-                    cfg.protocol = match args.next().as_deref() {
-                        Some("paper") => TrialProtocol::Paper,
-                        Some("active") => TrialProtocol::Active,
-                        other => return Err(format!("--protocol: `{other:?}`")),
-                    }
-                }
-                "--trials" => trials = parse("--trials", args.next())?,
-                "--eval" => cfg.eval_pushes = parse("--eval", args.next())?,
-                "--spread-weight" => cfg.active.spread_weight = parse(&a, args.next())?,
-                "--prior-weight" => cfg.active.prior_weight = parse(&a, args.next())?,
-                "--reach-deg" => cfg.active.reach_rad = parse::<f64>(&a, args.next())?.to_radians(),
-                "--starts" => cfg.active.starts_per_alpha = parse(&a, args.next())?,
-                "--seeds" => {
-                    let v: String = parse(&a, args.next())?;
-                    let (lo, hi) = v.split_once('-').ok_or("--seeds: FIRST-LAST")?;
-                    let (lo, hi): (u64, u64) = (
-                        lo.parse().map_err(|_| "--seeds")?,
-                        hi.parse().map_err(|_| "--seeds")?,
-                    );
-                    seeds = (lo..=hi).collect();
-                }
-                "--objects" => {
-                    let v: String = parse(&a, args.next())?;
-                    objects = v.split(',').map(String::from).collect();
-                }
-                other => return Err(format!("unknown argument `{other}`")),
-            }
-            Ok(())
-        })();
+        let r = apply(
+            &a,
+            &mut args,
+            &mut cfg,
+            &mut trials,
+            &mut seeds,
+            &mut objects,
+        );
         if let Err(e) = r {
             eprintln!("active_tuning: {e}");
             return ExitCode::FAILURE;
