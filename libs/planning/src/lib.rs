@@ -25,11 +25,11 @@ pub use learning_protocol::{
     ALPHAS_DEG, Disruption, LearnFrame, LearnProtocol, LearnProtocolError, LearnProtocolSettings,
     LearnWorld, ProtocolStep, SHAPE_APPROACH_TIMEOUT_S, TrialRun, max_object_reach_m,
 };
+pub use limit_surface::{ContactMode, Footprint, GRAVITY_MPS2, LimitSurface, PointPush, Twist};
 pub use push_choice::{
     Goal, PathFollowing, PushChoiceSettings, PushPlan, PushPlanner, path_direction_at, path_offset,
     path_projection, symmetric_angle_error,
 };
-pub use limit_surface::{ContactMode, Footprint, GRAVITY_MPS2, LimitSurface, PointPush, Twist};
 pub use push_model::{PushModel, PushedObject, learned_push_travel_m};
 pub use push_routine::{PushPhase, PushRoutine, PushSettings};
 pub use push_service::{aim_point_at, learned_push_length_m};
