@@ -245,7 +245,12 @@ fn main() -> ExitCode {
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),
         Cmd::Bench {
             what: BenchCmd::Learn(args),
-        } => agp_harness::stop::guarded(|| bench_learn::run(args)),
+        } if args.curve.is_empty() => agp_harness::stop::guarded(|| bench_learn::run(args)),
+        Cmd::Bench {
+            what: BenchCmd::Learn(args),
+        } => agp_harness::stop::guarded(|| {
+            agp_harness::learn_curve::run_curve(args).map(|_| ExitCode::SUCCESS)
+        }),
         Cmd::Bench {
             what: BenchCmd::Place(args),
         } => agp_harness::stop::guarded(|| bench_tasks::run_place(args)),

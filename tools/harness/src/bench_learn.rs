@@ -176,11 +176,10 @@ impl Human {
 }
 
 /// Runs `agp bench learn`. A missed target is reported, not an error: the exit code is
-/// success once every object was learned and every file written.
+/// success once every object was learned and every file written. With `--curve` the
+/// caller runs [`crate::learn_curve::run_curve`] instead, which runs this module's
+/// [`learn`] at each point (so this module does not reach back into that one).
 pub fn run(args: &BenchLearnArgs) -> Result<ExitCode> {
-    if !args.curve.is_empty() {
-        return crate::learn_curve::run_curve(args).map(|_| ExitCode::SUCCESS);
-    }
     learn(args).map(|_| ExitCode::SUCCESS)
 }
 
@@ -653,7 +652,7 @@ fn config(args: &BenchLearnArgs, seed: u64) -> Result<LearnBenchConfig> {
         bail!("--trials must be at least 1");
     }
     let protocol = TrialProtocol::from(args.protocol);
-    if protocol == TrialProtocol::Paper && args.trials % args.alphas.len().max(1) != 0 {
+    if protocol == TrialProtocol::Paper && !args.trials.is_multiple_of(args.alphas.len().max(1)) {
         bail!(
             "--trials {}: the paper's protocol makes as many trials at each of the {} alphas, so a multiple of {}",
             args.trials,

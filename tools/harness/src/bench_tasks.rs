@@ -129,15 +129,19 @@ impl<'a> Runner<'a> {
     /// its instance is `bench-<pid>-<tag>`: short (iceoryx2's socket paths), and telling
     /// apart the pipelines that run at once.
     pub(crate) fn start_tagged(
-        in_process: bool,
-        scenario_arg: &str,
-        scenario: &'a Scenario,
-        ag: Option<&Path>,
+        plan: &EpisodePlan<'a>,
         planner: PlannerKind,
         seed: u64,
         tag: &str,
-        online: bool,
     ) -> Result<Self> {
+        let EpisodePlan {
+            in_process,
+            scenario_arg,
+            scenario,
+            ag,
+            online,
+            ..
+        } = *plan;
         let ag = ag.filter(|_| planner.needs_gradient());
         if online {
             if in_process {
@@ -282,16 +286,7 @@ pub(crate) fn run_episodes(
             });
         }
         let tag = instance_tag(planner, seed, plan.several_seeds);
-        let mut runner = match Runner::start_tagged(
-            plan.in_process,
-            plan.scenario_arg,
-            plan.scenario,
-            plan.ag,
-            planner,
-            seed,
-            &tag,
-            plan.online,
-        ) {
+        let mut runner = match Runner::start_tagged(plan, planner, seed, &tag) {
             Ok(r) => r,
             Err(_) if stop::requested() => {
                 return Ok(PairRun {
