@@ -170,7 +170,7 @@ fn learning_shards_merge_into_what_one_run_writes() {
     ];
     shards_merge_into_one_run(dir.path(), &bench, 2, 2, false);
     // Each seed learned its own gradient, in a folder of its own.
-    for seed in [100, 101] {
+    for seed in [200, 201] {
         assert!(
             dir.path()
                 .join(format!("learned/seed-{seed}/triangle.ag"))
@@ -214,12 +214,12 @@ fn parts_of_different_runs_are_refused_naming_the_file() {
     place("2/2", "4", "baseline", "other-run.json");
     place("2/2", "2", "affordance", "other-planner.json");
     std::fs::write(dir.path().join("broken.json"), "{").expect("write");
-    let learn = r#"{"benchmark": "learn", "seed": 101, "objects": {}}"#;
+    let learn = r#"{"benchmark": "learn", "seed": 201, "objects": {}}"#;
     std::fs::write(dir.path().join("learn.json"), learn).expect("write");
     let cases: [(&[&str], &str); 6] = [
         (
             &["a.json"],
-            "seed 101 of the run (seeds 100, 101) is in no part",
+            "seed 201 of the run (seeds 200, 201) is in no part",
         ),
         (&["a.json", "a.json"], "`a.json`: given twice"),
         (
@@ -228,7 +228,7 @@ fn parts_of_different_runs_are_refused_naming_the_file() {
         ),
         (
             &["a.json", "other-planner.json"],
-            "`other-planner.json`: seed 101 is of another run",
+            "`other-planner.json`: seed 201 is of another run",
         ),
         (&["a.json", "broken.json"], "`broken.json`: not JSON"),
         (
@@ -269,6 +269,6 @@ fn parts_of_different_runs_are_refused_naming_the_file() {
     );
     assert_eq!(
         json(&dir.path().join("merged.json"))["seeds"],
-        serde_json::json!([100, 101])
+        serde_json::json!([200, 201])
     );
 }
