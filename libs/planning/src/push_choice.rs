@@ -573,6 +573,12 @@ mod tests {
     /// push's heading, without turning it: pushes are learned every 3 deg round it from
     /// the start circle of radius 100 mm.
     fn sliding_disc() -> AffordanceGradient {
+        disc_moved_at(0.0)
+    }
+
+    /// The disc of [`sliding_disc`], each push carrying it 30 mm at `drift_rad` to the left
+    /// of the push's heading.
+    fn disc_moved_at(drift_rad: f64) -> AffordanceGradient {
         use agp_affordance::{AffordanceLearner, LearnerConfig, PushOutcome};
         let config = LearnerConfig::default();
         let mut learner = AffordanceLearner::new("disc", &config).expect("learner");
@@ -589,7 +595,7 @@ mod tests {
                 };
                 let push = PushOutcome {
                     contact_point_obj: c,
-                    displacement_obj: 0.03 * DVec2::from_angle(heading),
+                    displacement_obj: 0.03 * DVec2::from_angle(heading + drift_rad),
                     rotation_rad: 0.0,
                     heading_obj: DVec2::from_angle(heading),
                 };
@@ -637,30 +643,7 @@ mod tests {
     /// The disc of [`sliding_disc`], but every push carries it 30 mm at 30 deg to the left
     /// of the push's heading.
     fn drifting_disc() -> AffordanceGradient {
-        use agp_affordance::{AffordanceLearner, LearnerConfig, PushOutcome};
-        let config = LearnerConfig::default();
-        let mut learner = AffordanceLearner::new("disc", &config).expect("learner");
-        for &alpha in &config.alphas_deg {
-            for k in 0..360 {
-                let p = 0.04 * DVec2::from_angle(f64::from(k).to_radians());
-                learner.add_border_point(alpha, p).expect("border point");
-            }
-            for k in 0..120 {
-                let phi = f64::from(3 * k).to_radians();
-                let c = 0.04 * DVec2::from_angle(phi);
-                let Some((_, heading)) = approach_start(c, alpha, 0.1) else {
-                    continue;
-                };
-                let push = PushOutcome {
-                    contact_point_obj: c,
-                    displacement_obj: 0.03 * DVec2::from_angle(heading + 30f64.to_radians()),
-                    rotation_rad: 0.0,
-                    heading_obj: DVec2::from_angle(heading),
-                };
-                learner.add_push(alpha, &push).expect("push");
-            }
-        }
-        learner.into_gradient()
+        disc_moved_at(30f64.to_radians())
     }
 
     #[test]
