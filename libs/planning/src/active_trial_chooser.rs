@@ -387,20 +387,7 @@ where
 {
     let world_err = LearnProtocolError::World;
     let lap_closed = protocol.shape(world)?;
-    let report = world
-        .wait_report(&[LearnReportKind::ShapeLearned, LearnReportKind::ShapeFailed])
-        .map_err(world_err)?;
-    if report.kind != LearnReportKind::ShapeLearned as u32 {
-        return Err(LearnProtocolError::ShapeFailed {
-            too_large_m: (report.border_radius_m > 0.0).then_some(report.border_radius_m),
-        });
-    }
-    let border = report.border_radius_m;
-    if !(border.is_finite() && border > 0.0) {
-        return Err(LearnProtocolError::NoBorder(border));
-    }
-    protocol.set_border_radius(border);
-    progress(ProtocolStep::ShapeLearned { lap_closed, report });
+    protocol.take_shape(world, lap_closed, progress)?;
     let radius = protocol.start_radius_m();
     for index in 0..trials {
         let choice = match gradient(world) {

@@ -456,6 +456,33 @@ impl LearnProtocol {
         Ok(TrialRun::Pushed { lap_closed })
     }
 
+    /// After the shape circling ([`Self::shape`], whose lap closed or not): waits for the
+    /// learner's verdict on the shape, takes its border radius (the start circle follows
+    /// from it) and says `ShapeLearned`. A shape the learner refused, or a border that is
+    /// not a positive radius, is the error.
+    pub(crate) fn take_shape<W: LearnWorld>(
+        &mut self,
+        world: &mut W,
+        lap_closed: bool,
+        progress: &mut dyn FnMut(ProtocolStep),
+    ) -> Result<(), LearnProtocolError<W::Error>> {
+        let report = world
+            .wait_report(&[LearnReportKind::ShapeLearned, LearnReportKind::ShapeFailed])
+            .map_err(LearnProtocolError::World)?;
+        if report.kind != LearnReportKind::ShapeLearned as u32 {
+            return Err(LearnProtocolError::ShapeFailed {
+                too_large_m: (report.border_radius_m > 0.0).then_some(report.border_radius_m),
+            });
+        }
+        let border = report.border_radius_m;
+        if !(border.is_finite() && border > 0.0) {
+            return Err(LearnProtocolError::NoBorder(border));
+        }
+        self.set_border_radius(border);
+        progress(ProtocolStep::ShapeLearned { lap_closed, report });
+        Ok(())
+    }
+
     /// The whole protocol: the shape circling, every trial (each answered by the learner
     /// before the next), `LearningDone`; returns the learner's `Learned` report (whether
     /// it saved the gradients is its `valid`). A restarted world runs the step under way
@@ -513,20 +540,7 @@ impl LearnProtocol {
                 Err(e) => return Err(e),
             }
         };
-        let report = world
-            .wait_report(&[LearnReportKind::ShapeLearned, LearnReportKind::ShapeFailed])
-            .map_err(world_err)?;
-        if report.kind != LearnReportKind::ShapeLearned as u32 {
-            return Err(LearnProtocolError::ShapeFailed {
-                too_large_m: (report.border_radius_m > 0.0).then_some(report.border_radius_m),
-            });
-        }
-        let border = report.border_radius_m;
-        if !(border.is_finite() && border > 0.0) {
-            return Err(LearnProtocolError::NoBorder(border));
-        }
-        self.set_border_radius(border);
-        progress(ProtocolStep::ShapeLearned { lap_closed, report });
+        self.take_shape(world, lap_closed, progress)?;
         let n = self.settings.trials_per_alpha;
         let total = self.settings.total_trials();
         let mut index = 0;
