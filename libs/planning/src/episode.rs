@@ -642,13 +642,7 @@ fn brain_for<'g>(
             let order = symmetry_order_of(&shape);
             let radius = learned_border_radius_m(&shape).ok_or(EpisodeRunError::NoBorder)?;
             let r = radius + robot.body_radius + config.start_gap_m;
-            let choice = PushChoiceSettings {
-                spread_weight: config.spread_weight,
-                reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
-                push_fractions: config.push_fractions.clone(),
-                alpha_step_deg: config.alpha_step_deg,
-                ..PushChoiceSettings::new(order, r)
-            };
+            let choice = choice_settings(config, order, r);
             let push_planner = PushPlanner::new(ag, choice);
             let long_planner = push_planner.with_push_fractions(vec![1.0]);
             (
@@ -663,6 +657,18 @@ fn brain_for<'g>(
     })
 }
 
+/// The push search's settings of an episode: the config's weights, push fractions and alpha
+/// step, for an object of symmetry `order` whose pushes start on the circle of radius `r`.
+fn choice_settings(config: &EpisodeConfig, order: u32, r: f64) -> PushChoiceSettings {
+    PushChoiceSettings {
+        spread_weight: config.spread_weight,
+        reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
+        push_fractions: config.push_fractions.clone(),
+        alpha_step_deg: config.alpha_step_deg,
+        ..PushChoiceSettings::new(order, r)
+    }
+}
+
 /// The `model` planner's brain: the affordance planner's search ([`PushPlanner`]) on
 /// the predictions of the pushing model of the true object, pushes started from the circle
 /// round its true border (as the gradient's from the learned one), and its true symmetry.
@@ -673,13 +679,7 @@ fn model_brain(
     let model = config.model.as_deref().ok_or(EpisodeRunError::NoModel)?;
     let order = model.object().symmetry_order;
     let r = model.object().footprint.radius() + robot.body_radius + config.start_gap_m;
-    let choice = PushChoiceSettings {
-        spread_weight: config.spread_weight,
-        reach_rotation_weight_m_per_rad: config.reach_rotation_weight_m_per_rad,
-        push_fractions: config.push_fractions.clone(),
-        alpha_step_deg: config.alpha_step_deg,
-        ..PushChoiceSettings::new(order, r)
-    };
+    let choice = choice_settings(config, order, r);
     let travel = learned_push_travel_m(
         config.push.push_speed,
         config.push.push_duration,

@@ -136,6 +136,16 @@ pub struct PushPlanner<'a> {
     radius: f64,
 }
 
+/// The heading of the push from each (contact, alpha) pair's start, contact-major as the
+/// predictions are; `None` where no start reaches the contact.
+fn headings_of(contacts: &[DVec2], alphas: &[f64], start_radius_m: f64) -> Vec<Option<DVec2>> {
+    contacts
+        .iter()
+        .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
+        .map(|(c, a)| approach_start(c, a, start_radius_m).map(|(_, h)| DVec2::from_angle(h)))
+        .collect()
+}
+
 impl<'a> PushPlanner<'a> {
     /// Precomputes the contact candidates, the alphas to try, the predictor for pushes
     /// from the start circle and its prediction of every candidate push (allocates; once
@@ -160,13 +170,7 @@ impl<'a> PushPlanner<'a> {
             .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
             .map(|(c, a)| predictor.predict(c, a))
             .collect();
-        let headings = contacts
-            .iter()
-            .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
-            .map(|(c, a)| {
-                approach_start(c, a, settings.start_radius_m).map(|(_, h)| DVec2::from_angle(h))
-            })
-            .collect();
+        let headings = headings_of(&contacts, &alphas, settings.start_radius_m);
         Self {
             predictor: Some(predictor),
             settings,
@@ -201,13 +205,7 @@ impl<'a> PushPlanner<'a> {
             "one prediction per (contact, alpha)"
         );
         let radius = contacts.iter().map(|c| c.length()).fold(0.0, f64::max);
-        let headings = contacts
-            .iter()
-            .flat_map(|&c| alphas.iter().map(move |&a| (c, a)))
-            .map(|(c, a)| {
-                approach_start(c, a, settings.start_radius_m).map(|(_, h)| DVec2::from_angle(h))
-            })
-            .collect();
+        let headings = headings_of(&contacts, &alphas, settings.start_radius_m);
         PushPlanner {
             predictor: None,
             settings,
