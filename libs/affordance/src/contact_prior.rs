@@ -125,22 +125,32 @@ pub struct PushMechanics {
     c: f64,
 }
 
+/// A circled border as a ring: the points binned by their angle round `centre` (`BINS`
+/// equal bins over the turn), the mean of each bin that holds one, counter-clockwise.
+/// Allocates the ring.
+pub fn angle_ring<const BINS: usize>(
+    points: impl IntoIterator<Item = DVec2>,
+    centre: DVec2,
+) -> Vec<DVec2> {
+    let mut sums = [(DVec2::ZERO, 0usize); BINS];
+    for p in points {
+        let a = angle::wrap_positive((p - centre).to_angle(), std::f64::consts::TAU);
+        let k = ((a / std::f64::consts::TAU * BINS as f64) as usize).min(BINS - 1);
+        sums[k].0 += p;
+        sums[k].1 += 1;
+    }
+    sums.iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(s, n)| *s / *n as f64)
+        .collect()
+}
+
 impl PushMechanics {
     /// The footprint enclosed by `border_obj` (object frame, the centroid at the origin).
     /// `None` for fewer than three angle bins with a point, or a zero area.
     pub fn from_border(border_obj: &[DVec2]) -> Option<Self> {
-        let mut sums = [(DVec2::ZERO, 0usize); RING_BINS];
-        for p in border_obj.iter().filter(|p| p.is_finite()) {
-            let a = angle::wrap_positive(p.to_angle(), std::f64::consts::TAU);
-            let k = ((a / std::f64::consts::TAU * RING_BINS as f64) as usize).min(RING_BINS - 1);
-            sums[k].0 += *p;
-            sums[k].1 += 1;
-        }
-        let ring: Vec<DVec2> = sums
-            .iter()
-            .filter(|(_, n)| *n > 0)
-            .map(|(s, n)| *s / *n as f64)
-            .collect();
+        let finite = border_obj.iter().copied().filter(|p| p.is_finite());
+        let ring = angle_ring::<RING_BINS>(finite, DVec2::ZERO);
         if ring.len() < 3 {
             return None;
         }

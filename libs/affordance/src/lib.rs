@@ -26,7 +26,9 @@ pub use ag_file::{
     MAX_AG_FILE_BYTES, MAX_ALPHA_DEG, MAX_ALPHAS, MAX_CELL_MAGNITUDE, MAX_LAYER_COUNT,
     MAX_NAME_LEN, MAX_PUSH_ROTATION_RAD,
 };
-pub use contact_prior::{ContactPriorBuildError, ContactPriorConfig, PushMechanics, contact_prior};
+pub use contact_prior::{
+    ContactPriorBuildError, ContactPriorConfig, PushMechanics, angle_ring, contact_prior,
+};
 pub use gaussian_smoother::{GaussianSmoother, SmoothingMethod};
 pub use grid::{DEFAULT_CELL_SIZE_M, Grid, GridPayloadReadError};
 pub use grid_set_assembler::{GradientFromGridsError, GridSetAssembler};

@@ -842,18 +842,7 @@ pub fn border_centroid(points: &[DVec2]) -> Option<DVec2> {
         return None;
     }
     let mean = points.iter().sum::<DVec2>() / points.len() as f64;
-    let mut sums = [(DVec2::ZERO, 0usize); BINS];
-    for p in points {
-        let a = angle::wrap_positive((*p - mean).to_angle(), std::f64::consts::TAU);
-        let k = ((a / std::f64::consts::TAU * BINS as f64) as usize).min(BINS - 1);
-        sums[k].0 += *p;
-        sums[k].1 += 1;
-    }
-    let ring: Vec<DVec2> = sums
-        .iter()
-        .filter(|(_, n)| *n > 0)
-        .map(|(s, n)| *s / *n as f64)
-        .collect();
+    let ring = agp_affordance::angle_ring::<BINS>(points.iter().copied(), mean);
     if ring.len() < 3 {
         return None;
     }
