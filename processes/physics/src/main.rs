@@ -65,10 +65,11 @@ struct Args {
     /// proof that a hot swap lost and repeated no step).
     #[arg(long)]
     step_log: Option<std::path::PathBuf>,
-    /// Lockstep: apply each motor command for this many steps (1 to 64), publishing every
-    /// frame and stepping on only once the estimator's estimate of the frame two before is
-    /// in, so the estimator takes in every frame, in order, without a command round trip
-    /// per step. A command answers every N-th frame. Needs an estimator on the instance.
+    /// Lockstep: apply each motor command for this many steps (1 to 64), without a command
+    /// round trip per step. Of the hold's frames, those the robot senses at (a new IR
+    /// sample or overhead fix, 64 Hz) and the last are published, each once the estimator
+    /// has estimated the frame published two before, so it takes in every one, in order. A
+    /// command answers every N-th step's frame. Needs an estimator on the instance.
     #[arg(long, default_value_t = 1)]
     hold_steps: u32,
 }
@@ -143,6 +144,7 @@ fn run() -> Result<()> {
         rate_hz: args.rate_hz,
         step_log,
         hold,
+        recent_frames: [0; HOLD_WINDOW as usize],
     };
     let result = match args.clock {
         Clock::Lockstep => runner.lockstep(&waiter, args.idle_timeout_s),
@@ -393,6 +395,9 @@ struct Runner {
     step_log: Option<StepLog>,
     /// `--hold-steps` above 1: each command held for that many steps, paced by the estimator.
     hold: Option<Hold>,
+    /// The steps of the last [`HOLD_WINDOW`] frames published, oldest first: a hold
+    /// publishes a frame once the estimate of the oldest is in.
+    recent_frames: [u64; HOLD_WINDOW as usize],
 }
 
 /// The longest hold `--hold-steps` takes.
@@ -432,11 +437,10 @@ impl Hold {
         })
     }
 
-    /// Until the estimate of frame `published + 1 - HOLD_WINDOW` or a later one is in:
-    /// then at most `HOLD_WINDOW - 1` frames wait for the estimator besides the one about
-    /// to be published.
-    fn pace(&mut self, published: u64) -> Result<()> {
-        let need = (published + 1).saturating_sub(HOLD_WINDOW);
+    /// Until the estimate of frame `need` or a later one is in. With `need` the oldest of
+    /// the last [`HOLD_WINDOW`] frames published, at most `HOLD_WINDOW - 1` frames then
+    /// wait for the estimator besides the one about to be published.
+    fn pace(&mut self, need: u64) -> Result<()> {
         let deadline = Instant::now() + HOLD_TIMEOUT;
         loop {
             let estimates = &self.estimates;
@@ -464,6 +468,11 @@ impl Hold {
     }
 }
 
+/// What the robot has sensed so far: its IR samples and overhead fixes.
+fn sensed(s: &agp_physics::SensorState) -> (u64, u64) {
+    (s.ir_sample, s.fix_seq)
+}
+
 /// Safety net of a held command's wait for the estimator.
 const HOLD_TIMEOUT: Duration = Duration::from_secs(60);
 
@@ -475,6 +484,8 @@ impl Runner {
     fn publish(&mut self, applied_ns: u64, cause: TimingHeader) -> Result<()> {
         let s = self.sim.sensors();
         let step = self.sim.step_count();
+        self.recent_frames.rotate_left(1);
+        self.recent_frames[HOLD_WINDOW as usize - 1] = step;
         let mut frame = IrFrame {
             step,
             sim_time_s: self.sim.sim_time(),
@@ -657,19 +668,9 @@ impl Runner {
                     idle_since = Instant::now();
                     reset = self.apply_resets()?;
                 }
-                WaitOutcome::Ready(Some((l, r, mut cause))) => {
+                WaitOutcome::Ready(Some((l, r, cause))) => {
                     idle_since = Instant::now();
-                    if let Some(log) = &mut self.step_log {
-                        log.record(step, self.active_epoch)?;
-                    }
-                    {
-                        let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
-                        self.sim.step(l, r);
-                    }
-                    let applied = monotonic_ns();
-                    cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
-                    self.publish(applied, cause)?;
-                    self.hold_on(l, r)?;
+                    self.apply_command(l, r, cause)?;
                     alloc_count::message_done();
                 }
             }
@@ -680,32 +681,66 @@ impl Runner {
         }
     }
 
-    /// With `--hold-steps N`: the command just applied, `N - 1` steps more, each once the
-    /// estimator has kept up (frames without a cause of their own).
-    fn hold_on(&mut self, l: f64, r: f64) -> Result<()> {
-        let Some(mut hold) = self.hold.take() else {
-            return Ok(());
-        };
-        let result = self.held_steps(&mut hold, l, r);
-        self.hold = Some(hold);
-        result
+    /// Applies a command: one step and its frame; with `--hold-steps N`, [`Self::held_steps`].
+    fn apply_command(&mut self, l: f64, r: f64, mut cause: TimingHeader) -> Result<()> {
+        if let Some(mut hold) = self.hold.take() {
+            let result = self.held_steps(&mut hold, l, r, cause);
+            self.hold = Some(hold);
+            return result;
+        }
+        if let Some(log) = &mut self.step_log {
+            log.record(self.sim.step_count(), self.active_epoch)?;
+        }
+        {
+            let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
+            self.sim.step(l, r);
+        }
+        let applied = monotonic_ns();
+        cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
+        self.publish(applied, cause)
     }
 
-    /// The steps of a hold after its first, each paced by the estimator.
-    fn held_steps(&mut self, hold: &mut Hold, l: f64, r: f64) -> Result<()> {
-        for _ in 1..hold.steps {
-            hold.pace(self.sim.step_count())?;
-            if shutdown_requested() {
+    /// With `--hold-steps N`: the command for N steps. Of their frames only those the robot
+    /// senses at are published (a new IR sample or overhead fix: the robot's 64 Hz, where
+    /// physics steps at 640) and the hold's last, which the next command answers; each
+    /// once the estimator has kept up. A frame between two samples repeats the sensing of
+    /// the one before, which the estimator takes in once (`ObjectTracker::observe`), so
+    /// the estimates of the frames published are those of publishing every frame. The
+    /// first frame published carries the command's timing (applied at the hold's first
+    /// step), the others none of their own.
+    fn held_steps(&mut self, hold: &mut Hold, l: f64, r: f64, cause: TimingHeader) -> Result<()> {
+        let mut cause = Some(cause);
+        let mut first_applied = 0;
+        for k in 1..=hold.steps {
+            if k > 1 && shutdown_requested() {
                 return Ok(());
             }
             if let Some(log) = &mut self.step_log {
                 log.record(self.sim.step_count(), self.active_epoch)?;
             }
+            let before = sensed(self.sim.sensors());
             {
                 let _in_simulation = alloc_count::enter(alloc_count::Region::Work);
                 self.sim.step(l, r);
             }
-            self.publish(monotonic_ns(), TimingHeader::default())?;
+            let applied = monotonic_ns();
+            if k == 1 {
+                first_applied = applied;
+            }
+            if k < hold.steps && before == sensed(self.sim.sensors()) {
+                continue;
+            }
+            hold.pace(self.recent_frames[0])?;
+            if shutdown_requested() {
+                return Ok(());
+            }
+            match cause.take() {
+                Some(mut c) => {
+                    c.stamps_ns[stage::COMMAND_APPLIED] = first_applied;
+                    self.publish(first_applied, c)?;
+                }
+                None => self.publish(applied, TimingHeader::default())?,
+            }
         }
         Ok(())
     }
