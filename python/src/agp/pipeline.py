@@ -221,10 +221,11 @@ class Ring:
     """The ring for a wheel-level planner: `step(l, r)` sends the command answering the
     latest frame and returns once a later frame and its estimate are in."""
 
-    def __init__(self, node: Node, epoch: int, token: int, buffer: int | None = None):
+    def __init__(self, node: Node, epoch: int, token: int, buffer: int | None = None, wait: str | None = None):
         """`buffer`: how many frames and estimates the subscribers keep (the newest); None,
         the services' most. 1 suits a reader of the newest alone, as the Gymnasium
-        environment with physics holding each command for several steps."""
+        environment with physics holding each command for several steps. `wait`: how the
+        waits wait (`AGP_WAIT`'s values); None, `AGP_PY_WAIT`, else `AGP_WAIT`."""
         self.node, self.epoch, self.token = node, epoch, token
         self.timeout_s = node.timeout_s
 
@@ -252,7 +253,22 @@ class Ring:
         self.seq = 0  # this planner's events
         self.sent_ns = 0
         self.steps = 0
-        self.spin_s = spin_seconds(os.environ.get("AGP_PY_WAIT", os.environ.get("AGP_WAIT", "")))
+        if wait is None:
+            wait = os.environ.get("AGP_PY_WAIT", os.environ.get("AGP_WAIT", ""))
+        self.spin_s = spin_seconds(wait)
+        # The command is built in a struct of this process's own (its epoch and token set
+        # once, the stamps it does not set zero) and copied into each loaned sample whole.
+        self._command = MotorCommand()
+        self._command.epoch, self._command.token = epoch, token
+        self._command_timing = self._command.timing
+        self._command_stamps = self._command.timing.stamps_ns
+        self._command_at = ctypes.addressof(self._command)
+        self._command_size = ctypes.sizeof(MotorCommand)
+        # The package's own loan and assume_init check the payload type (a fixed-size
+        # struct here) through `typing` on every call: straight to the bindings' methods
+        # when this version of iceoryx2 has them.
+        self._loan = getattr(self.commands, "__loan_uninit", self.commands.loan_uninit)
+        self._assume_init = getattr(iox2.SampleMutUninit, "__assume_init", iox2.SampleMutUninit.assume_init)
         self._wait(after_step=-1)
 
     # -- samples -------------------------------------------------------------------------------
@@ -367,21 +383,20 @@ class Ring:
     def send(self, left_mps: float, right_mps: float) -> None:
         """Publishes the command answering the latest frame (no wait)."""
         f, e = self.frame, self.estimate
-        u = self.commands.loan_uninit()
-        c = MotorCommand.from_address(u.payload_ptr)
-        ctypes.memset(ctypes.addressof(c), 0, ctypes.sizeof(MotorCommand))
-        c.step, c.epoch, c.token = f.step, self.epoch, self.token
-        c.left_mps, c.right_mps = left_mps, right_mps
+        c, stamps = self._command, self._command_stamps
+        c.step, c.left_mps, c.right_mps = f.step, left_mps, right_mps
         # The frame's trace and stamps, the estimator's and this planner's, for `agp profile`.
-        t, ft = c.timing, f.timing
-        t.trace_id = ft.trace_id
-        t.stamps_ns[FRAME_PUBLISHED] = ft.stamps_ns[FRAME_PUBLISHED]
-        t.stamps_ns[ESTIMATOR_RECEIVED] = e.timing.stamps_ns[ESTIMATOR_RECEIVED]
-        t.stamps_ns[ESTIMATE_PUBLISHED] = e.timing.stamps_ns[ESTIMATE_PUBLISHED]
-        t.stamps_ns[PLANNER_RECEIVED] = self.received_ns
-        t.stamps_ns[COMMAND_PUBLISHED] = time.monotonic_ns()
-        del c, t, ft
-        u.assume_init().send()
+        ft, es = f.timing, e.timing.stamps_ns
+        self._command_timing.trace_id = ft.trace_id
+        stamps[FRAME_PUBLISHED] = ft.stamps_ns[FRAME_PUBLISHED]
+        stamps[ESTIMATOR_RECEIVED] = es[ESTIMATOR_RECEIVED]
+        stamps[ESTIMATE_PUBLISHED] = es[ESTIMATE_PUBLISHED]
+        stamps[PLANNER_RECEIVED] = self.received_ns
+        stamps[COMMAND_PUBLISHED] = time.monotonic_ns()
+        del ft, es
+        u = self._loan()
+        ctypes.memmove(u.payload_ptr, self._command_at, self._command_size)
+        self._assume_init(u).send()
         self.physics_inbox.notify()
         self.steps += 1
 
