@@ -174,9 +174,8 @@ def main() -> None:
 
     py = bench_python()
     load = os.getloadavg()
-    wheels = gym.make(
-        "agp/Place-v0", scenario="triangle", control="wheels", wait=args.wheels_wait, instance=f"bg-w-{os.getpid() % 100000}"
-    )
+    wait = {"wait": args.wheels_wait} if args.wheels_wait else {}
+    wheels = gym.make("agp/Place-v0", scenario="triangle", control="wheels", instance=f"bg-w-{os.getpid() % 100000}", **wait)
     push = gym.make("agp/Place-v0", scenario="triangle", instance=f"bg-p-{os.getpid() % 100000}")
     rows: dict[str, list[dict]] = {"gym-pusht": [], "agp wheels": [], "agp push": []}
     try:
