@@ -378,6 +378,11 @@ pub struct PathFollowing<'p> {
     /// The same for the rotation: the share of its predicted rotation that a push shorter
     /// than the learned one makes.
     pub turn_gain: f64,
+    /// Metres of cost per metre of a short push's sideways motion as the gradient predicts
+    /// it (before `cross_gain`): the share a short push makes varies from push to push and
+    /// seed to seed (a tenth to the whole of it), so a push that needs its sideways motion
+    /// to keep to the path is a gamble; 0 trusts the corrected prediction.
+    pub cross_doubt: f64,
 }
 
 /// The sideways part of `displacement` across the unit `heading`.
@@ -496,6 +501,7 @@ impl PushPlanner<'_> {
                     });
                     let cost = follow.track_weight * track / 4.0
                         + d1
+                        + follow.cross_doubt * cross.length()
                         + follow.progress_weight * (s1 - s0 - follow.advance_m).abs()
                         + risk
                         + s.reach_rotation_weight_m_per_rad * rotation.abs()
@@ -622,6 +628,7 @@ mod tests {
                 offset_m,
                 cross_gain: 1.0,
                 turn_gain: 1.0,
+                cross_doubt: 0.0,
             };
             let plan = planner.plan_along(from, &follow).expect("a push");
             DVec2::new(plan.predicted.x, plan.predicted.y)
@@ -661,6 +668,7 @@ mod tests {
                 offset_m: 0.0,
                 cross_gain,
                 turn_gain: 1.0,
+                cross_doubt: 0.0,
             };
             planner
                 .plan_along(Pose2::new(0.0, 0.0, 0.0), &follow)
@@ -700,6 +708,45 @@ mod tests {
         let (_, h) = approach_start(full.contact_obj, full.alpha_deg, 0.1).expect("a start");
         let side = DVec2::from_angle(h).perp_dot(full.prediction.displacement);
         assert!((side - 0.015).abs() < 0.05 * 0.015, "{:.2} mm", side * 1e3);
+    }
+
+    #[test]
+    fn a_sideways_doubt_charges_each_short_push_its_sideways_motion_and_never_picks_more_of_it() {
+        let ag = drifting_disc();
+        let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
+        let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
+        let plan = |cross_doubt: f64| {
+            let follow = PathFollowing {
+                path: &path,
+                push_fractions: &[0.375, 0.25],
+                advance_m: 0.04,
+                track_weight: 3.0,
+                progress_weight: 0.5,
+                heading_tolerance_rad: None,
+                heading_weight_m_per_rad: 0.0,
+                offset_m: 0.0,
+                cross_gain: 0.5,
+                turn_gain: 1.0,
+                cross_doubt,
+            };
+            planner
+                .plan_along(Pose2::new(0.0, 0.002, 0.0), &follow)
+                .expect("a push")
+        };
+        let free = plan(0.0);
+        for doubt in [0.5, 2.0, 10.0] {
+            let p = plan(doubt);
+            let (x0, x1) = (
+                free.uncorrected_cross.length(),
+                p.uncorrected_cross.length(),
+            );
+            // The best push with the charge costs at least the best without it plus its own
+            // charge, and at most the free best's cost plus the free best's charge.
+            assert!(p.cost - doubt * x1 >= free.cost - 1e-12, "doubt {doubt}");
+            assert!(p.cost <= free.cost + doubt * x0 + 1e-12, "doubt {doubt}");
+            // So it never carries the object sideways more than the free choice.
+            assert!(x1 <= x0 + 1e-12, "doubt {doubt}: {x1} > {x0}");
+        }
     }
 
     #[test]

@@ -8,7 +8,9 @@
 //! `SPREAD`, `FRACS`, `HEAD` and `HEADW` (heading tolerance and weight, deg), `XTG` and
 //! `XTL` (the cross-track integral's gain and leak), `XG` and `XR` (the share of their
 //! predicted sideways motion short path pushes make, and how far each circling moves it),
-//! `XT` (the share of their predicted rotation),
+//! `XT` (the share of their predicted rotation), `XD` (the cost per metre of a short path
+//! push's predicted sideways motion), `XN` (the most pushes between circlings along a path),
+//! `XC` (m: circle once the pushes since the last circling predicted this much sideways),
 //! `AGDIR` (each seed's own AG, `AGDIR/seed-<S>/lshape.ag`, as `agp bench learn --seeds`
 //! writes them, instead of AG_FILE for every seed).
 
@@ -79,6 +81,15 @@ fn main() -> anyhow::Result<()> {
     }
     if let Some(v) = env("XT") {
         config.path_turn_gain = v;
+    }
+    if let Some(v) = env("XD") {
+        config.path_cross_doubt = v;
+    }
+    if let Some(v) = env("XN") {
+        config.path_max_pushes_between_estimates = v as u32;
+    }
+    if let Some(v) = env("XC") {
+        config.path_circle_after_cross_m = v;
     }
     let ag_dir = std::env::var_os("AGDIR").map(std::path::PathBuf::from);
     let own_ags: Vec<(u64, AffordanceGradient)> = match &ag_dir {
