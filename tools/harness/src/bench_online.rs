@@ -32,6 +32,11 @@ pub struct BenchOnlineArgs {
     /// Also draw the first episode at the first seed to this SVG file.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Step the physics library and the estimator's perception (the same tracker, prior
+    /// and online learning) in this process instead of over the pipeline: faster, for
+    /// tuning; the reported figures run over the pipeline.
+    #[arg(long)]
+    pub in_process: bool,
 }
 
 /// Runs the benchmark: the affordance planner, learning online from the contact prior.
@@ -43,7 +48,7 @@ pub fn run(args: &BenchOnlineArgs) -> Result<Value> {
             seeds: args.seeds.clone(),
             planners: vec![PlannerKind::Affordance],
             ag: None,
-            in_process: false,
+            in_process: args.in_process,
             json: args.json.clone(),
             plot: args.plot.clone(),
         },

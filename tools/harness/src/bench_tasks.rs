@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::seeds::Spread;
-use crate::{median, place_goals, run_episode};
+use crate::{median, place_goals, run_episode, run_online_episode};
 use agp_affordance::AffordanceGradient;
 use agp_planning::{EpisodeConfig, EpisodeResult, Evaluation, PlannerKind, Task};
 use agp_shared_types::Pose2;
@@ -119,6 +119,9 @@ pub(crate) enum Runner<'a> {
         scenario: &'a Scenario,
         robot: RobotDescription,
         ag: Option<AffordanceGradient>,
+        /// An object never pushed: each episode's tracker starts from the contact prior
+        /// ([`run_online_episode`]).
+        online: bool,
     },
     Pipeline(PipelineBench),
 }
@@ -143,10 +146,7 @@ impl<'a> Runner<'a> {
             ..
         } = *plan;
         let ag = ag.filter(|_| planner.needs_gradient());
-        if online {
-            if in_process {
-                bail!("an object never pushed (`agp bench online`) runs over the pipeline only");
-            }
+        if online && !in_process {
             return Ok(Self::Pipeline(PipelineBench::start_online(
                 scenario_arg,
                 seed,
@@ -165,6 +165,7 @@ impl<'a> Runner<'a> {
                 scenario,
                 robot: RobotDescription::epuck(),
                 ag,
+                online,
             })
         } else {
             Ok(Self::Pipeline(PipelineBench::start(
@@ -186,7 +187,14 @@ impl<'a> Runner<'a> {
             Self::InProcess {
                 scenario,
                 robot,
+                online: true,
+                ..
+            } => Ok(run_online_episode(scenario, robot, planner, task, config)?),
+            Self::InProcess {
+                scenario,
+                robot,
                 ag,
+                online: false,
             } => Ok(run_episode(
                 scenario,
                 robot,
@@ -422,105 +430,42 @@ pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<
     };
     // From here on the episode loops poll the stop flag.
     let _checked = stop::checked();
-    let note = physics_note(args.in_process);
-    let all_seeds = args.seeds.all();
-    let seeds = args.seeds.mine();
     let mut planners = args.planners.clone();
     planners.sort();
     planners.dedup();
-    let base = EpisodeConfig::for_task(&scenario.task);
-
-    eprintln!(
-        "bench place: scenario `{}`, {} episodes per planner and seed, seeds {}{}; {note}",
-        scenario.name,
-        args.episodes,
-        seed_list(&seeds),
-        args.seeds.shard_note()
-    );
-    if planners.contains(&PlannerKind::Oracle) {
-        eprintln!("{ORACLE_NOTE}");
-    }
-    if planners.contains(&PlannerKind::Model) {
-        eprintln!("{MODEL_NOTE}");
-    }
-    let work: Vec<(u64, PlannerKind)> = seeds
+    let place = PlaceRun {
+        args,
+        base: EpisodeConfig::for_task(&scenario.task),
+        scenario: &scenario,
+        seeds: args.seeds.mine(),
+        planners,
+        wall,
+    };
+    place.announce();
+    let work: Vec<(u64, PlannerKind)> = place
+        .seeds
         .iter()
-        .flat_map(|&seed| planners.iter().map(move |&p| (seed, p)))
+        .flat_map(|&seed| place.planners.iter().map(move |&p| (seed, p)))
         .collect();
     let bar = progress((args.episodes * work.len()) as u64);
-    bar.set_prefix(prefix_of(&planners));
+    bar.set_prefix(prefix_of(&place.planners));
     let plan = EpisodePlan {
         benchmark: "place",
         in_process: args.in_process,
         scenario_arg: &args.scenario,
         scenario: &scenario,
         ag: ag.as_deref(),
-        several_seeds: seeds.len() > 1,
+        several_seeds: place.seeds.len() > 1,
         online,
         bar: &bar,
     };
-    let tolerance = (base.tolerance_m * 1e3, base.tolerance_rad.to_degrees());
     let planned = args.episodes * work.len();
-    // The one-seed documents of `runs` (the pairs of `work` in order, each with the
-    // episodes it finished).
-    let seed_docs = |runs: &[(&[EpisodeResult], f64)]| -> Vec<Value> {
-        seeds
-            .iter()
-            .zip(runs.chunks(planners.len()))
-            .map(|(&seed, pairs)| {
-                let goals = place_goals(&scenario, args.episodes, seed);
-                let mut planners_json = Map::new();
-                let mut wall_s: f64 = 0.0;
-                for (&planner, &(results, planner_wall_s)) in planners.iter().zip(pairs) {
-                    wall_s = wall_s.max(planner_wall_s);
-                    planners_json.insert(
-                        planner.name().to_owned(),
-                        planner_json(planner, seed, results, &goals),
-                    );
-                }
-                json!({
-                    "benchmark": "place",
-                    "scenario": scenario.name,
-                    "seed": seed,
-                    "physics": physics_label(args.in_process),
-                    "tolerance_mm": tolerance.0,
-                    "tolerance_deg": tolerance.1,
-                    "planners": planners_json,
-                    "wall_time_s": wall_s,
-                })
-            })
-            .collect()
-    };
-    // What finished, seeds of fewer episodes included: the checkpoints and a stop's JSON.
-    let partial_doc = |runs: &[(&[EpisodeResult], f64)]| -> Result<Value> {
-        let parts = run_parts(
-            &seed_docs(runs),
-            "place",
-            |_| Value::Null,
-            all_seeds.clone(),
-        )?;
-        let mut doc = assemble(&parts, args.seeds.shard);
-        doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());
-        Ok(doc)
-    };
     let runs = run_episodes(
         &plan,
         &work,
-        |seed| {
-            place_goals(&scenario, args.episodes, seed)
-                .into_iter()
-                .enumerate()
-                .map(|(k, goal)| {
-                    let config = EpisodeConfig {
-                        seed: seed.wrapping_add(k as u64),
-                        ..base.clone()
-                    };
-                    (format!("episode {k}"), Task::Place { goal }, config)
-                })
-                .collect()
-        },
+        |seed| place.episodes(seed),
         |runs, finished| {
-            if let Ok(doc) = partial_doc(runs) {
+            if let Ok(doc) = place.partial_doc(runs) {
                 stop::checkpoint(doc, args.json.as_deref(), "place", finished, planned);
             }
         },
@@ -530,11 +475,10 @@ pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<
         .iter()
         .map(|r| (r.results.as_slice(), r.wall_s))
         .collect();
-    let finished: usize = runs.iter().map(|(r, _)| r.len()).sum();
     if stop::requested() {
-        let doc = partial_doc(&runs)?;
+        let finished: usize = runs.iter().map(|(r, _)| r.len()).sum();
         return Err(stop::write_partial(
-            doc,
+            place.partial_doc(&runs)?,
             args.json.as_deref(),
             "place",
             finished,
@@ -542,27 +486,146 @@ pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<
         ));
     }
     stop::end_checkpoints(args.json.as_deref(), "place");
-    let docs = seed_docs(&runs);
-    let first_seed_runs: BTreeMap<PlannerKind, &[EpisodeResult]> = planners
-        .iter()
-        .zip(&runs)
-        .map(|(&p, &(r, _))| (p, r))
-        .collect();
-    let parts = run_parts(&docs, "place", place_signature, all_seeds)?;
-    let mut doc = assemble(&parts, args.seeds.shard);
-    let wall_time_s = wall.elapsed().as_secs_f64();
-    doc["wall_time_s"] = json!(wall_time_s);
+    let mut doc = place.final_doc(&runs)?;
     if online {
         doc["learn"] = json!("online");
     }
-    print_place(&doc, note);
-    println!("wall time {wall_time_s:.1} s");
-    if let Some(path) = &args.json {
-        write_json(path, &doc)?;
-        println!("JSON     {}", path.display());
+    place.report(&doc, &runs)?;
+    Ok(doc)
+}
+
+/// One run of `agp bench place` (or `agp bench online`): what its parts share.
+struct PlaceRun<'a> {
+    args: &'a BenchPlaceArgs,
+    scenario: &'a Scenario,
+    /// The episode config of the scenario's task, each episode's seed apart.
+    base: EpisodeConfig,
+    /// The seeds this run (its shard) runs.
+    seeds: Vec<u64>,
+    /// The planners, sorted, each once.
+    planners: Vec<PlannerKind>,
+    /// When the run started.
+    wall: Instant,
+}
+
+impl PlaceRun<'_> {
+    /// Says on stderr what runs, and what reads ground truth.
+    fn announce(&self) {
+        eprintln!(
+            "bench place: scenario `{}`, {} episodes per planner and seed, seeds {}{}; {}",
+            self.scenario.name,
+            self.args.episodes,
+            seed_list(&self.seeds),
+            self.args.seeds.shard_note(),
+            physics_note(self.args.in_process)
+        );
+        if self.planners.contains(&PlannerKind::Oracle) {
+            eprintln!("{ORACLE_NOTE}");
+        }
+        if self.planners.contains(&PlannerKind::Model) {
+            eprintln!("{MODEL_NOTE}");
+        }
     }
-    if let Some(path) = &args.plot {
-        let seed = seeds[0];
+
+    /// The episodes of `seed`: its goals, episode k seeded `seed + k`.
+    fn episodes(&self, seed: u64) -> Vec<(String, Task, EpisodeConfig)> {
+        place_goals(self.scenario, self.args.episodes, seed)
+            .into_iter()
+            .enumerate()
+            .map(|(k, goal)| {
+                let config = EpisodeConfig {
+                    seed: seed.wrapping_add(k as u64),
+                    ..self.base.clone()
+                };
+                (format!("episode {k}"), Task::Place { goal }, config)
+            })
+            .collect()
+    }
+
+    /// The one-seed documents of `runs` (the pairs of the work in order, each with the
+    /// episodes it finished).
+    fn seed_docs(&self, runs: &[(&[EpisodeResult], f64)]) -> Vec<Value> {
+        self.seeds
+            .iter()
+            .zip(runs.chunks(self.planners.len()))
+            .map(|(&seed, pairs)| {
+                let goals = place_goals(self.scenario, self.args.episodes, seed);
+                let mut planners_json = Map::new();
+                let mut wall_s: f64 = 0.0;
+                for (&planner, &(results, planner_wall_s)) in self.planners.iter().zip(pairs) {
+                    wall_s = wall_s.max(planner_wall_s);
+                    planners_json.insert(
+                        planner.name().to_owned(),
+                        planner_json(planner, seed, results, &goals),
+                    );
+                }
+                json!({
+                    "benchmark": "place",
+                    "scenario": self.scenario.name,
+                    "seed": seed,
+                    "physics": physics_label(self.args.in_process),
+                    "tolerance_mm": self.base.tolerance_m * 1e3,
+                    "tolerance_deg": self.base.tolerance_rad.to_degrees(),
+                    "planners": planners_json,
+                    "wall_time_s": wall_s,
+                })
+            })
+            .collect()
+    }
+
+    /// What finished, seeds of fewer episodes included: the checkpoints and a stop's JSON.
+    fn partial_doc(&self, runs: &[(&[EpisodeResult], f64)]) -> Result<Value> {
+        let parts = run_parts(
+            &self.seed_docs(runs),
+            "place",
+            |_| Value::Null,
+            self.args.seeds.all(),
+        )?;
+        let mut doc = assemble(&parts, self.args.seeds.shard);
+        doc["wall_time_s"] = json!(self.wall.elapsed().as_secs_f64());
+        Ok(doc)
+    }
+
+    /// Every seed finished: the run's document, its seeds checked alike.
+    fn final_doc(&self, runs: &[(&[EpisodeResult], f64)]) -> Result<Value> {
+        let parts = run_parts(
+            &self.seed_docs(runs),
+            "place",
+            place_signature,
+            self.args.seeds.all(),
+        )?;
+        let mut doc = assemble(&parts, self.args.seeds.shard);
+        doc["wall_time_s"] = json!(self.wall.elapsed().as_secs_f64());
+        Ok(doc)
+    }
+
+    /// Prints the table, writes the JSON and the plot, as asked.
+    fn report(&self, doc: &Value, runs: &[(&[EpisodeResult], f64)]) -> Result<()> {
+        print_place(doc, physics_note(self.args.in_process));
+        let wall_time_s = doc["wall_time_s"]
+            .as_f64()
+            .unwrap_or_else(|| self.wall.elapsed().as_secs_f64());
+        println!("wall time {wall_time_s:.1} s");
+        if let Some(path) = &self.args.json {
+            write_json(path, doc)?;
+            println!("JSON     {}", path.display());
+        }
+        if let Some(path) = &self.args.plot {
+            self.plot_first_episodes(path, runs)?;
+            println!("plot     {}", path.display());
+        }
+        Ok(())
+    }
+
+    /// Draws the first episode of each planner at the first seed to `path`.
+    fn plot_first_episodes(&self, path: &Path, runs: &[(&[EpisodeResult], f64)]) -> Result<()> {
+        let seed = self.seeds[0];
+        let first_seed_runs: BTreeMap<PlannerKind, &[EpisodeResult]> = self
+            .planners
+            .iter()
+            .zip(runs)
+            .map(|(&p, &(r, _))| (p, r))
+            .collect();
         let panels: Vec<Panel> = first_seed_runs
             .iter()
             .filter_map(|(planner, runs)| {
@@ -585,21 +648,20 @@ pub(crate) fn run_place_learning(args: &BenchPlaceArgs, online: bool) -> Result<
                 })
             })
             .collect();
-        let goal = place_goals(&scenario, 1, seed)[0];
+        let goal = place_goals(self.scenario, 1, seed)[0];
         let title = format!(
-            "place `{}`: first episode per planner at seed {seed}, goal outline in red ({note})",
-            scenario.name
+            "place `{}`: first episode per planner at seed {seed}, goal outline in red ({})",
+            self.scenario.name,
+            physics_note(self.args.in_process)
         );
         plot_runs(
             path,
             &title,
-            &scenario.object.shape,
+            &self.scenario.object.shape,
             &panels,
             Overlay::Goal(goal),
-        )?;
-        println!("plot     {}", path.display());
+        )
     }
-    Ok(doc)
 }
 
 /// One planner's episodes at one seed, as the JSON holds them: each run, and the figures

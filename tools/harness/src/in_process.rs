@@ -5,8 +5,8 @@
 //! the next frame. It offers ground truth, so episodes run against it are judged; the
 //! planner reads it only as the `oracle`.
 
-use agp_affordance::AffordanceGradient;
-use agp_perception::{ObjectTracker, TrackerConfig, TrackerError};
+use agp_affordance::{AffordanceGradient, ContactPriorConfig};
+use agp_perception::{ObjectTracker, OnlineLearningConfig, TrackerConfig, TrackerError};
 use agp_physics::{Sim, SimBuildError, SimConfig};
 use agp_planning::{
     EpisodeConfig, EpisodeResult, EpisodeRunError, PlannerKind, Senses, Task, World,
@@ -66,6 +66,8 @@ impl InProcessWorld {
             .observe(s.ir_sample, &s.ir_raw, s.odometry, s.fix, s.fix_seq);
         self.estimate = ObjectEstimate {
             step: self.sim.step_count(),
+            // The set the estimator would have published: one per gradient version.
+            grids_seq: self.tracker.gradient_generation(),
             ..ObjectEstimate::default()
         };
         self.tracker.write_estimate(&mut self.estimate);
@@ -84,6 +86,12 @@ impl InProcessWorld {
     /// The estimator's perception (its gradient, as learned on online).
     pub fn tracker(&self) -> &ObjectTracker {
         &self.tracker
+    }
+
+    /// The estimator's perception, to set it up (an object never pushed:
+    /// [`ObjectTracker::start_from_prior`]).
+    pub fn tracker_mut(&mut self) -> &mut ObjectTracker {
+        &mut self.tracker
     }
 
     /// The world is put back for a new episode: the object and the robot at the given
@@ -196,4 +204,45 @@ pub fn run_episode(
     let result = drive_episode(&mut world, robot, ag, planner, task, config)?;
     // The judge: orientation modulo the object's true symmetry, which only it may read.
     Ok(result.judged(task, scenario.object.shape.symmetry_order(), config))
+}
+
+/// Runs one episode of an object never pushed before (`agp bench online --in-process`):
+/// as [`run_episode`], but the tracker starts without a gradient, builds the contact prior
+/// from the episode's first circling and learns on from every push
+/// ([`OnlineLearningConfig::updating`]), as `agp-estimator --learn-online --from-prior`
+/// does; the planner waits for the prior ([`EpisodeConfig::await_gradient`]) and plans on
+/// each gradient the tracker learns.
+pub fn run_online_episode(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+) -> Result<EpisodeResult, InProcessEpisodeError> {
+    let sim = Sim::new(
+        scenario,
+        robot,
+        SimConfig {
+            seed: config.seed,
+            ..SimConfig::default()
+        },
+    )?;
+    let mut world = InProcessWorld::with_tracker(
+        sim,
+        robot,
+        None,
+        TrackerConfig {
+            online: OnlineLearningConfig::updating(),
+            ..TrackerConfig::default()
+        },
+    )?;
+    world
+        .tracker_mut()
+        .start_from_prior(&scenario.name, ContactPriorConfig::default());
+    let config = EpisodeConfig {
+        await_gradient: true,
+        ..config.clone()
+    };
+    let result = drive_episode(&mut world, robot, None, planner, task, &config)?;
+    Ok(result.judged(task, scenario.object.shape.symmetry_order(), &config))
 }

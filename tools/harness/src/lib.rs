@@ -35,7 +35,7 @@ pub mod stop;
 pub mod task_goals;
 mod task_plot;
 
-pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode};
+pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode, run_online_episode};
 pub use task_goals::{PlannerSummary, median, place_goals, trajectory_error};
 
 /// Writes one line to stdout; a closed stdout is no reason to panic (the SIGPIPE it raises
