@@ -498,7 +498,7 @@ fn agp_profile_across_a_tls_bridge_sets_the_bridged_hops_against_the_links_zenoh
     assert!(
         profile
             .stdout
-            .contains("the bridged hops against it (p50): estimator->planner "),
+            .contains("the bridged hops against it (p50, mutual TLS): estimator->planner "),
         "{}",
         profile.stdout
     );

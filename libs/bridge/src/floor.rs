@@ -4,8 +4,8 @@
 //!
 //! The pong end listens and echoes each sample from the ping key onto the pong key; the ping
 //! end connects, sends one sample at a time, stamped, and times its round trip. A one-way
-//! figure is half a round trip. Both ends wait for a sample as a bridge's receiving end does
-//! (`AGP_WAIT`'s strategy: by default polling for 200 us after the last sample, then
+//! figure is half a round trip. Both ends wait for a sample as a bridge's receiving end does,
+//! with the strategy they are given (the bridge's, [`crate::BRIDGE_WAIT_ENV`]: by default
 //! blocking).
 
 use std::time::{Duration, Instant};
@@ -66,10 +66,12 @@ pub struct FloorFigures {
     pub max_ns: u64,
 }
 
-/// Echoes pings until `stop` says so (checked between samples, at least every 20 ms).
+/// Echoes pings until `stop` says so (checked between samples, at least every 20 ms),
+/// waiting for each as `wait` says.
 pub fn floor_pong(
     endpoint: &Endpoint,
     tls: Option<&TlsKeys>,
+    wait: WaitStrategy,
     stop: impl Fn() -> bool,
 ) -> Result<(), FloorError> {
     let session = open(endpoint, tls)?;
@@ -84,7 +86,6 @@ pub fn floor_pong(
         .with(zenoh::handlers::FifoChannel::new(64))
         .wait()
         .map_err(zerr)?;
-    let wait = WaitStrategy::from_env();
     let mut last = Instant::now();
     while !stop() {
         match next_sample(&pings, wait, last.elapsed()) {
@@ -105,10 +106,12 @@ pub fn floor_pong(
 }
 
 /// Pings the pong end at `endpoint` for `seconds` of timed round trips of `size`-byte
-/// samples (at least 16) after a warm-up, one at a time, and tells the pong end to stop.
+/// samples (at least 16) after a warm-up, one at a time, waiting for each answer as `wait`
+/// says, and tells the pong end to stop.
 pub fn floor_ping(
     endpoint: &Endpoint,
     tls: Option<&TlsKeys>,
+    wait: WaitStrategy,
     seconds: f64,
     size: usize,
 ) -> Result<FloorFigures, FloorError> {
@@ -144,7 +147,6 @@ pub fn floor_ping(
     }
     // Drain late answers of the start-up pings.
     while let Ok(Some(_)) = pongs.try_recv() {}
-    let wait = WaitStrategy::from_env();
     let mut one_way: Vec<u64> = Vec::with_capacity(1 << 20);
     let timed = Duration::from_secs_f64(seconds.max(0.1));
     let mut timed_from: Option<Instant> = None;

@@ -17,7 +17,9 @@ mod route;
 pub mod tls;
 pub mod wire;
 
-pub use bridge::{BridgeConfig, BridgeEnd, BridgeError, BridgeReport, FAR_TIMEOUT, run_bridge};
+pub use bridge::{
+    BRIDGE_WAIT_ENV, BridgeConfig, BridgeEnd, BridgeError, BridgeReport, FAR_TIMEOUT, run_bridge,
+};
 pub use endpoint::{Endpoint, EndpointParseError};
 pub use floor::{FloorError, FloorFigures, floor_ping, floor_pong};
 pub use ports::Restamp;

@@ -62,6 +62,20 @@ pub(crate) struct BridgeArgs {
     /// is waited for as long as it takes.
     #[arg(long, env = "AGP_BRIDGE_FAR_TIMEOUT_S", default_value_t = agp_bridge::FAR_TIMEOUT.as_secs_f64(), value_parser = far_timeout_s)]
     far_timeout_s: f64,
+    /// How the bridge's two threads wait for the next message (from this instance's topics,
+    /// from the link): `block` (the default), `spin-then-block[:US]`, `yield` or `spin`, as
+    /// `AGP_WAIT` names them; not `AGP_WAIT`'s own default. What wakes a bridge is the
+    /// kernel (an iceoryx2 event's socket, Zenoh's receiving thread), and a bridge that
+    /// polls takes the cores from the Zenoh threads and the pipeline it waits for (on 2
+    /// loaded cores neither way was reliably faster: README, the bridge's profile).
+    /// `agp profile` measures the link's floor waiting this way.
+    #[arg(long, env = agp_bridge::BRIDGE_WAIT_ENV, default_value = "block", value_parser = bridge_wait)]
+    wait: WaitStrategy,
+}
+
+/// `--wait`: a strategy as `AGP_WAIT` names it.
+fn bridge_wait(s: &str) -> Result<WaitStrategy, String> {
+    WaitStrategy::parse(s).ok_or_else(|| WaitStrategy::NOT_A_STRATEGY.to_owned())
 }
 
 /// Exit status of a bridge whose far end went away without a word.
@@ -150,10 +164,12 @@ impl Security {
 }
 
 /// A bare Zenoh ping-pong between this process and a copy of it over the loopback, on the
-/// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, for
-/// `seconds` of timed round trips of `size` bytes: the locator and the figures.
+/// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, both
+/// ends waiting as `wait` says (a bridge's `AGP_WAIT`), for `seconds` of timed round trips
+/// of `size` bytes: the locator and the figures.
 pub(crate) fn zenoh_floor(
     tls: Option<&Path>,
+    wait: WaitStrategy,
     seconds: f64,
     size: usize,
 ) -> Result<(String, agp_bridge::FloorFigures)> {
@@ -171,12 +187,18 @@ pub(crate) fn zenoh_floor(
     let mut cmd = std::process::Command::new(exe);
     cmd.args(["bridge", "floor-pong", "--listen", &locator])
         .args(security.args())
+        .env(agp_bridge::BRIDGE_WAIT_ENV, wait.name())
         .stdin(std::process::Stdio::null());
     // It dies with this process, however it ends.
     let mut pong =
         agp_runtime::children::spawn_guarded(&mut cmd).context("start the floor's pong end")?;
-    let figures =
-        agp_bridge::floor_ping(&Endpoint::connect(&locator)?, keys.as_ref(), seconds, size);
+    let figures = agp_bridge::floor_ping(
+        &Endpoint::connect(&locator)?,
+        keys.as_ref(),
+        wait,
+        seconds,
+        size,
+    );
     let _ = pong.kill();
     let _ = pong.wait();
     Ok((locator, figures?))
@@ -184,7 +206,12 @@ pub(crate) fn zenoh_floor(
 
 /// `agp bridge floor`.
 fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
-    let (locator, f) = zenoh_floor(security.tls.as_deref(), seconds, size)?;
+    let (locator, f) = zenoh_floor(
+        security.tls.as_deref(),
+        bridge_wait_from_env()?,
+        seconds,
+        size,
+    )?;
     let us = |ns: u64| ns as f64 / 1e3;
     println!(
         "agp: Zenoh floor over {locator} ({}), {size} B samples, {} round trips: one way p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
@@ -202,22 +229,56 @@ fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
     Ok(0)
 }
 
-/// The bridge of a running process `pid`, from its command line: the key folder of its
-/// link (`None`: plain TCP), if it is an `agp bridge`.
-pub(crate) fn bridge_of_process(pid: u32) -> Option<Option<PathBuf>> {
-    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
-    let args: Vec<String> = cmdline
-        .split(|b| *b == 0)
-        .map(|a| String::from_utf8_lossy(a).into_owned())
-        .collect();
+/// How a bridge waits when neither `--wait` nor `AGP_BRIDGE_WAIT` says (`agp bridge floor`
+/// and its far end wait so too).
+fn bridge_wait_from_env() -> Result<WaitStrategy> {
+    match std::env::var(agp_bridge::BRIDGE_WAIT_ENV) {
+        Ok(v) => {
+            bridge_wait(&v).map_err(|why| anyhow!("{}=`{v}`: {why}", agp_bridge::BRIDGE_WAIT_ENV))
+        }
+        Err(_) => Ok(WaitStrategy::Block),
+    }
+}
+
+/// A running `agp bridge`, as its command line and environment show it.
+pub(crate) struct RunningBridge {
+    /// The key folder of its link (`None`: plain TCP).
+    pub tls: Option<PathBuf>,
+    /// How its threads wait (`--wait`, else `AGP_BRIDGE_WAIT`, else `block`).
+    pub wait: WaitStrategy,
+}
+
+/// The bridge of a running process `pid`, if it is an `agp bridge`.
+pub(crate) fn bridge_of_process(pid: u32) -> Option<RunningBridge> {
+    let words = |file: &str| -> Option<Vec<String>> {
+        let bytes = std::fs::read(format!("/proc/{pid}/{file}")).ok()?;
+        Some(
+            bytes
+                .split(|b| *b == 0)
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect(),
+        )
+    };
+    let args = words("cmdline")?;
     if args.get(1).map(String::as_str) != Some("bridge") {
         return None;
     }
-    let tls = args
-        .windows(2)
-        .find(|w| w[0] == "--tls")
-        .map(|w| PathBuf::from(&w[1]));
-    Some(tls)
+    let after = |flag: &str| args.windows(2).find(|w| w[0] == flag).map(|w| w[1].clone());
+    let env_wait = || {
+        words("environ")?.into_iter().find_map(|kv| {
+            kv.strip_prefix(agp_bridge::BRIDGE_WAIT_ENV)
+                .and_then(|v| v.strip_prefix('='))
+                .map(str::to_owned)
+        })
+    };
+    let wait = after("--wait")
+        .or_else(env_wait)
+        .and_then(|w| WaitStrategy::parse(&w))
+        .unwrap_or(WaitStrategy::Block);
+    Some(RunningBridge {
+        tls: after("--tls").map(PathBuf::from),
+        wait,
+    })
 }
 
 /// `agp bridge floor-pong`: the far end of `agp bridge floor`.
@@ -227,6 +288,7 @@ fn floor_pong(listen: &str, security: &Security) -> Result<u8> {
     agp_bridge::floor_pong(
         &Endpoint::listen(listen)?,
         keys.as_ref(),
+        bridge_wait_from_env()?,
         agp_runtime::shutdown_requested,
     )?;
     Ok(0)
@@ -301,7 +363,7 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
         token: session_token_from_env(),
         key,
         node_name: format!("bridge-{}", side.name()),
-        wait: WaitStrategy::from_env(),
+        wait: args.wait,
         far_timeout: std::time::Duration::from_secs_f64(args.far_timeout_s),
         // `agp up` gives every child its clock; by hand, lockstep is the default clock.
         redeliver_command: std::env::var("AGP_CLOCK").as_deref().unwrap_or("lockstep")

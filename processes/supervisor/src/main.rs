@@ -85,7 +85,18 @@ enum Cmd {
     /// stage and end to end (IR frame published -> the motor command it caused applied),
     /// beside the floor of a bare iceoryx2 ping-pong with the same waiting strategy.
     ///
+    /// Across a bridge (an instance with a `remote` process, whose planner runs in another
+    /// instance): profile the robot's instance. Its frames carry the planner side's stamps
+    /// too, so the two hops that cross the link (estimator->planner, planner->physics) are
+    /// measured, and in the same run the link's floor: a bare Zenoh ping-pong between two
+    /// `agp` processes on the bridge's own transport (mutual TLS with its key folder, or
+    /// plain TCP if it runs `insecure`), each bridged hop given as a ratio to it ("link
+    /// floor" line; `link_floor` in the JSON). Profile a TLS bridge and a plain one to set
+    /// them side by side (tools/bench_bridge_profile.py does both, repeated).
+    ///
     /// Example: agp profile --seconds 5 --json profile.json --plot profile.svg
+    ///
+    /// Example: agp profile --instance bridge_robot --seconds 5 --floor-seconds 2
     Profile(profile::ProfileArgs),
     /// Serve a live view of a running instance to Foxglove (a Foxglove WebSocket server):
     /// the robot, the object as the estimator believes it with its uncertainty, the goal,

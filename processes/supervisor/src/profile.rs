@@ -33,6 +33,15 @@
 //! paused at most until the deadline. The pong side dies with the profiler
 //! (`PR_SET_PDEATHSIG`), and the next `agp profile` removes the files of a floor whose
 //! profiler died.
+//!
+//! An instance with a bridge (an `agp bridge` among its processes: its planner, or its
+//! physics and estimator, run in another instance) gets a second floor after the first: the
+//! link's, a bare Zenoh ping-pong between `agp` and a copy of itself (`agp bridge
+//! floor-pong`) on the bridge's own transport (mutual TLS with the bridge's key folder, or
+//! plain TCP), read from the bridge's command line, both ends waiting as the bridge does
+//! (`agp bridge --wait`, `block` by default), the pipeline paused meanwhile as for the first. The two hops that cross the link
+//! (estimator->planner, planner->physics) are each given as a ratio to it: what the bridge
+//! costs beyond Zenoh's own.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -1112,7 +1121,7 @@ impl Report {
         })
     }
 
-    /// Latency histograms of each hop, end to end and the floor, log-scaled x.
+    /// Latency histograms of each hop, end to end, the floor and the link floor, log-scaled x.
     fn plot(&self, path: &Path) -> Result<()> {
         let mut series: Vec<(String, &Histogram<u64>)> = self
             .sampling
@@ -1124,6 +1133,9 @@ impl Report {
         if !self.floor.histogram.is_empty() {
             series.push(("floor".to_owned(), &self.floor.histogram));
         }
+        if let Some(link) = self.link_floor.as_ref().filter(|l| !l.histogram.is_empty()) {
+            series.push((format!("link floor ({})", link.transport), &link.histogram));
+        }
         let svg = plot_svg(&series, &self.instance, &self.waiting)?;
         std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
     }
@@ -1132,8 +1144,6 @@ impl Report {
 /// Buckets per decade of the plot.
 const PLOT_BUCKETS_PER_DECADE: f64 = 20.0;
 
-/// One series of the plot: `(latency us at the bucket's geometric centre, share of the
-/// series' samples in the bucket)`.
 /// The hops a bridge carries, whichever side of it the profiled instance is: the estimate
 /// to the planner and its command back (physics and the estimator run on one side).
 const BRIDGED_HOPS: [&str; 2] = ["estimator->planner", "planner->physics"];
@@ -1143,6 +1153,7 @@ struct LinkFloor {
     /// `mutual TLS` or `plain TCP`.
     transport: &'static str,
     figures: Figures,
+    histogram: Histogram<u64>,
 }
 
 impl LinkFloor {
@@ -1152,21 +1163,43 @@ impl LinkFloor {
             .and_then(|h| h.ratio(&self.figures))
     }
 
+    /// What the profile says of the link: how its floor was measured, and each bridged hop
+    /// sampled, its p50 and its ratio to the floor's.
+    fn lines(&self, hops: &[Figures]) -> [String; 2] {
+        let us = |ns: u64| ns as f64 * 1e-3;
+        let against: Vec<String> = BRIDGED_HOPS
+            .iter()
+            .filter_map(|n| {
+                let hop = hops.iter().find(|h| h.name == *n)?;
+                let r = self.ratio(hops, n)?;
+                Some(format!("{n} {:.2} us = {r:.2}x", us(hop.p50_ns)))
+            })
+            .collect();
+        [
+            format!(
+                "  link floor ({}): bare Zenoh ping-pong between two `agp` processes over the bridge's transport on the loopback, waiting as the bridge does, one-way = round trip / 2, {} round trips after the iceoryx2 floor: p50 {:.2} us, p99 {:.2} us",
+                self.transport,
+                self.figures.samples,
+                us(self.figures.p50_ns),
+                us(self.figures.p99_ns)
+            ),
+            format!(
+                "  the bridged hops against it (p50, {}): {}",
+                self.transport,
+                if against.is_empty() {
+                    "none sampled".to_owned()
+                } else {
+                    against.join(", ")
+                }
+            ),
+        ]
+    }
+
     fn print(&self, hops: &[Figures], line: impl Fn(&str, &Figures)) {
         line("floor", &self.figures);
-        let ratios: Vec<String> = BRIDGED_HOPS
-            .iter()
-            .filter_map(|n| self.ratio(hops, n).map(|r| format!("{n} {r:.1}x")))
-            .collect();
-        println!(
-            "  link floor ({}): bare Zenoh ping-pong between two `agp` processes over the bridge's transport on the loopback, one-way = round trip / 2, after the iceoryx2 floor; the bridged hops against it (p50): {}",
-            self.transport,
-            if ratios.is_empty() {
-                "none sampled".to_owned()
-            } else {
-                ratios.join(", ")
-            }
-        );
+        for l in self.lines(hops) {
+            println!("{l}");
+        }
     }
 
     fn to_json(&self, hops: &[Figures]) -> serde_json::Value {
@@ -1182,12 +1215,13 @@ impl LinkFloor {
 }
 
 /// The Zenoh floor of instance `name`'s bridge, if one of its processes is an `agp bridge`
-/// (its transport and keys read from its command line), measured for `seconds` with the
-/// pipeline of `pause` paused meanwhile. A floor that cannot be measured is said, and the
+/// (its transport, keys and waiting read from its command line and environment), both ends
+/// waiting as the bridge does, measured for `seconds` with the pipeline of `pause` paused
+/// meanwhile. A floor that cannot be measured is said, and the
 /// profile goes on without it.
 fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<LinkFloor> {
     let r = control_client::ask(name, agp_shared_types::ControlKind::Status).ok()?;
-    let tls = control::StatusReport::new(name, &r)
+    let bridge = control::StatusReport::new(name, &r)
         .processes
         .iter()
         .filter_map(|p| p.pid)
@@ -1198,7 +1232,7 @@ fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<Link
             .transpose()
             .context("cannot pause the pipeline for the link floor")?;
         // The lease outlasts the floor by LEASE_MARGIN; it is given back right after.
-        let floor = crate::bridge::zenoh_floor(tls.as_deref(), seconds, 64);
+        let floor = crate::bridge::zenoh_floor(bridge.tls.as_deref(), bridge.wait, seconds, 64);
         if let Some(lease) = &mut lease {
             lease.release()?;
         }
@@ -1218,6 +1252,7 @@ fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<Link
             Some(LinkFloor {
                 transport,
                 figures: Figures::new("link_floor", &h),
+                histogram: h,
             })
         }
         Err(e) => {
@@ -1227,6 +1262,8 @@ fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<Link
     }
 }
 
+/// One series of the plot: `(latency us at the bucket's geometric centre, share of the
+/// series' samples in the bucket)`.
 fn buckets(h: &Histogram<u64>, lo_ns: f64, hi_ns: f64) -> Vec<(f64, f64)> {
     let step = 10f64.powf(1.0 / PLOT_BUCKETS_PER_DECADE);
     let total = h.len().max(1) as f64;
@@ -1468,6 +1505,56 @@ mod tests {
             ["planner", "physics.step", "physics.publish"]
         );
         assert_eq!(v["end_to_end"]["name"], "end_to_end");
+    }
+
+    #[test]
+    fn the_link_floor_says_its_transport_and_sets_each_bridged_hop_against_its_p50() {
+        // Figures as a histogram would give them (its quantiles are read to 3 digits).
+        let figures = |name: &str, ns: u64| Figures {
+            name: name.to_owned(),
+            samples: 100,
+            p50_ns: ns,
+            p90_ns: ns,
+            p99_ns: ns,
+            p999_ns: ns,
+            max_ns: ns,
+        };
+        let floor = figures("link_floor", 20_000);
+        let histogram = histogram();
+        let hops = [
+            figures("physics->estimator", 2_000),
+            figures("estimator->planner", 30_000),
+            figures("planner->physics", 25_000),
+        ];
+        for transport in ["mutual TLS", "plain TCP"] {
+            let link = LinkFloor {
+                transport,
+                figures: floor.clone(),
+                histogram: histogram.clone(),
+            };
+            let [how, against] = link.lines(&hops);
+            assert!(how.contains(&format!("link floor ({transport})")), "{how}");
+            assert!(how.contains("p50 20.00 us"), "{how}");
+            assert_eq!(
+                against,
+                format!(
+                    "  the bridged hops against it (p50, {transport}): estimator->planner 30.00 us = 1.50x, planner->physics 25.00 us = 1.25x"
+                )
+            );
+            let json = link.to_json(&hops);
+            assert_eq!(json["transport"], transport);
+            assert_eq!(
+                json["hops_ratio_to_link_floor_p50"]["estimator->planner"],
+                1.5
+            );
+        }
+        // No bridged hop sampled: said so, not a ratio of nothing.
+        let link = LinkFloor {
+            transport: "plain TCP",
+            figures: floor,
+            histogram,
+        };
+        assert!(link.lines(&hops[..1])[1].ends_with("none sampled"));
     }
 
     #[test]

@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""`agp profile` across a bridge, mutual TLS beside plain TCP, repeated: each bridged hop
+against the link's Zenoh floor measured in the same run.
+
+    python3 tools/bench_bridge_profile.py [--bin target/release] [--rounds 5] [--seconds 5]
+                                          [--floor-seconds 2] [--ag results/triangle.ag]
+                                          [--out results/bridge-profile]
+
+Each round runs, for each transport (TLS, then plain TCP): two lockstep live sessions on
+this machine joined over the loopback by `agp bridge` (physics and the estimator in the
+robot's instance, the affordance planner serving goals in the other), a placement goal,
+then `agp profile --instance <robot's> --json`, then `agp down` of both. The profile samples
+the pipeline, then with the robot's pipeline paused runs the iceoryx2 floor and the link's
+floor (a bare Zenoh ping-pong between two `agp` processes on the bridge's transport), and
+sets each bridged hop (estimator->planner, planner->physics) against the link floor's p50.
+
+Prints one line per run and, at the end, the medians over the rounds per transport, with
+the machine's load average (1 min) beside them. JSON of every run goes under --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BRIDGED = ["estimator->planner", "planner->physics"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+ENV = dict(os.environ)
+
+
+def agp(bin_dir: Path, *args: str, check: bool = True, timeout: float = 120) -> subprocess.CompletedProcess:
+    r = subprocess.run([str(bin_dir / "agp"), *args], capture_output=True, text=True, timeout=timeout, env=ENV)
+    if check and r.returncode != 0:
+        sys.exit(f"bench_bridge_profile: `agp {' '.join(args)}` exited {r.returncode}:\n{r.stdout}\n{r.stderr}")
+    return r
+
+
+def launch_files(out: Path, tag: str, ag: Path, endpoint: str, security: str) -> tuple[Path, Path, str, str]:
+    robot, planner = f"bpr{tag}-{os.getpid() % 100000}", f"bpp{tag}-{os.getpid() % 100000}"
+    r = out / f"robot-{tag}.toml"
+    p = out / f"planner-{tag}.toml"
+    r.write_text(
+        f'instance = "{robot}"\nscenario = "triangle"\nresults = "{out}"\n\n[clock]\nmode = "lockstep"\n\n'
+        f'[[process]]\nname = "physics"\nexec = "agp-physics"\n\n'
+        f'[[process]]\nname = "estimator"\nexec = "agp-estimator"\nargs = ["--load", "{ag}"]\n\n'
+        f'[[process]]\nname = "planner"\nremote = {{ role = "planner", listen = "{endpoint}", {security} }}\n'
+    )
+    p.write_text(
+        f'instance = "{planner}"\nscenario = "triangle"\nresults = "{out}"\n\n[clock]\nmode = "lockstep"\n\n'
+        f'[[process]]\nname = "robot"\nremote = {{ role = "robot", connect = "{endpoint}", {security} }}\n\n'
+        f'[[process]]\nname = "planner"\nexec = "agp-planner"\nargs = ["--mode", "serve", "--planner", "affordance"]\n'
+    )
+    return r, p, robot, planner
+
+
+def one_run(bin_dir: Path, out: Path, ag: Path, keys: Path, tls: bool, k: int, args) -> dict:
+    tag = "tls" if tls else "tcp"
+    port = free_port()
+    endpoint = f"{tag}/127.0.0.1:{port}"
+    security = f'tls = "{keys}"' if tls else "insecure = true"
+    r, p, robot, planner = launch_files(out, tag, ag, endpoint, security)
+    agp(bin_dir, "up", str(r), "--detach")
+    try:
+        agp(bin_dir, "up", str(p), "--detach")
+        try:
+            agp(bin_dir, "goal", "--instance", robot, "--place", "300", "150", "90")
+            time.sleep(args.settle)
+            path = out / f"profile-{tag}-{k}.json"
+            prof = agp(
+                bin_dir, "profile", "--instance", robot, "--seconds", str(args.seconds),
+                "--floor-seconds", str(args.floor_seconds), "--json", str(path),
+            )
+            (out / f"profile-{tag}-{k}.txt").write_text(prof.stdout)
+            return json.loads(path.read_text())
+        finally:
+            agp(bin_dir, "down", "--instance", planner, check=False)
+    finally:
+        agp(bin_dir, "down", "--instance", robot, check=False)
+
+
+def figures(j: dict) -> dict:
+    hops = {h["name"]: h["p50_ns"] / 1e3 for h in j["hops"]}
+    link = j.get("link_floor") or {}
+    return {
+        "load": (j.get("load_average") or [float("nan")])[0],
+        "steps_per_s": j.get("steps_per_s") or 0.0,
+        "iox_floor": j["floor"]["p50_ns"] / 1e3,
+        "link_floor": link.get("p50_ns", float("nan")) / 1e3,
+        **{h: hops.get(h, float("nan")) for h in ["physics->estimator", *BRIDGED]},
+        **{f"{h} ratio": (link.get("hops_ratio_to_link_floor_p50") or {}).get(h) or float("nan") for h in BRIDGED},
+    }
+
+
+def line(tag: str, f: dict) -> str:
+    return (
+        f"{tag:<4} load {f['load']:5.2f}  {f['steps_per_s']:7.0f} steps/s  "
+        f"link floor {f['link_floor']:6.1f} us  "
+        + "  ".join(f"{h} {f[h]:6.1f} us ({f[h + ' ratio']:.2f}x)" for h in BRIDGED)
+        + f"  | local physics->estimator {f['physics->estimator']:.1f} us, iceoryx2 floor {f['iox_floor']:.2f} us"
+    )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--bin", default=str(ROOT / "target/release"))
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--floor-seconds", type=float, default=2.0)
+    ap.add_argument("--settle", type=float, default=2.0, help="seconds between the goal and the profile")
+    ap.add_argument("--ag", default=str(ROOT / "results/triangle.ag"))
+    ap.add_argument("--out", default=str(ROOT / "results/bridge-profile"))
+    ap.add_argument("--only", choices=["tls", "tcp"], help="one transport only")
+    ap.add_argument("--env", action="append", default=[], metavar="K=V",
+                    help="set for every agp process (both supervisors, so every pipeline process and bridge, and the profiler), e.g. AGP_WAIT=block")
+    args = ap.parse_args()
+    for kv in args.env:
+        k, _, v = kv.partition("=")
+        ENV[k] = v
+    bin_dir, out, ag = Path(args.bin).resolve(), Path(args.out).resolve(), Path(args.ag).resolve()
+    if not ag.exists():
+        sys.exit(f"bench_bridge_profile: no {ag}: run `agp up` once first (it learns the triangle)")
+    out.mkdir(parents=True, exist_ok=True)
+    keys = out / "keys"
+    if not keys.exists():
+        agp(bin_dir, "bridge", "keygen", str(keys))
+    runs: dict[str, list[dict]] = {"tls": [], "tcp": []}
+    transports = [t for t in ["tls", "tcp"] if args.only in (None, t)]
+    for k in range(args.rounds):
+        for tag in transports:
+            f = figures(one_run(bin_dir, out, ag, keys, tag == "tls", k, args))
+            runs[tag].append(f)
+            print(line(tag, f), flush=True)
+    print(f"\nmedians over {args.rounds} rounds ({args.seconds} s sampled, {args.floor_seconds} s per floor){' with ' + ' '.join(args.env) if args.env else ''}:")
+    for tag in transports:
+        med = {key: statistics.median(r[key] for r in runs[tag]) for key in runs[tag][0]}
+        print(line(tag, med) + f"  [load {min(r['load'] for r in runs[tag]):.1f}-{max(r['load'] for r in runs[tag]):.1f}]")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
