@@ -207,35 +207,11 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     let human = Human {
         to_stderr: json_to_stdout,
     };
-
     let as_specified = cfg.protocol == TrialProtocol::Paper
         && cfg.trials_per_alpha == PAPER_TRIALS_PER_ALPHA
         && args.eval >= MIN_EVAL_PUSHES
         && cfg.alphas_deg == PAPER_ALPHAS_DEG;
-    human.say(
-        "agp bench learn: physics in-process (the rapier2d simulator linked into `agp` as a library, not the `agp-physics` process over shared memory)",
-    );
-    human.say(&format!(
-        "{} {}{}, alphas {} deg, {}, {} unseen pushes, push {} s at {:.0} mm/s",
-        if seeds.len() == 1 { "seed" } else { "seeds" },
-        seed_list(&seeds),
-        args.seeds.shard_note(),
-        alphas_text(&cfg.alphas_deg),
-        protocol_text(&cfg),
-        cfg.eval_pushes,
-        cfg.push.push_duration,
-        cfg.push.push_speed * 1e3
-    ));
-    if cfg.protocol == TrialProtocol::Active {
-        human.say(
-            "note: the active protocol (issue 33), not the paper's: each trial where the gradient learned so far is least sure",
-        );
-    } else if !as_specified {
-        human.say(&format!(
-            "note: not the benchmark's protocol (alphas {} deg, {PAPER_TRIALS_PER_ALPHA} trials per alpha, at least {MIN_EVAL_PUSHES} unseen pushes): these figures are not benchmark results",
-            alphas_text(&PAPER_ALPHAS_DEG)
-        ));
-    }
+    announce(human, args, &cfg, &seeds, as_specified);
 
     let work: Vec<(LearnBenchConfig, &Job)> = seeds
         .iter()
@@ -249,79 +225,22 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
     bar.set_prefix("learning");
     // The objects and seeds are independent (each its own simulator): they learn side by
     // side on the machine's cores, and are reported in the order given.
-    let learned = learn_objects(&work, &bar);
+    let mut learned = learn_objects(&work, &bar).into_iter();
     let mut docs = Vec::with_capacity(seeds.len());
     let mut learned_count = 0;
-    let mut learned = learned.into_iter();
     for &seed in &seeds {
-        let cfg = config(args, seed)?;
-        let out = seed_dir(&args.out, seed, all_seeds.len());
-        std::fs::create_dir_all(&out)
-            .with_context(|| format!("--out: cannot create the folder {}", out.display()))?;
-        let mut objects = Map::new();
-        let mut missed = Vec::new();
-        for job in &jobs {
-            let outcome = learned.next().context("an object without its outcome")?;
-            let (report, wall_s) = match outcome {
-                // Stopped by a signal: the objects learned are kept, this one is not.
-                Err(LearnBenchError::Stopped { .. }) if crate::stop::requested() => continue,
-                other => other.with_context(|| format!("cannot learn `{}`", job.scenario.name))?,
-            };
-            learned_count += 1;
-            let (ag_path, plot_path) = write_files(&out, job, &cfg, &report)?;
-            if all_seeds.len() > 1 && seed == all_seeds[0] {
-                // The run's first seed's gradient is also where `agp bench place` looks by
-                // default (its shard alone writes it).
-                let default = self::ag_path(&args.out, &job.scenario);
-                std::fs::copy(&ag_path, &default).with_context(|| {
-                    format!("cannot copy {} to {}", ag_path.display(), default.display())
-                })?;
-            }
-            if seeds.len() == 1 {
-                bar.suspend(|| {
-                    human.say(&format!(
-                        "{}  AG file  {}\n  plot     {}",
-                        table(job, &report, wall_s),
-                        ag_path.display(),
-                        plot_path.display()
-                    ));
-                });
-            }
-            missed.extend(
-                report
-                    .targets()
-                    .into_iter()
-                    .filter(|t| !t.met)
-                    .map(|t| format!("{}: {} ({})", job.scenario.name, t.what, t.measured)),
-            );
-            objects.insert(
-                job.scenario.name.clone(),
-                object_json(job, &report, wall_s, &ag_path, &plot_path),
-            );
+        let run = SeedRun {
+            args,
+            seed,
+            all_seeds: &all_seeds,
+            alone: seeds.len() == 1,
+            as_specified,
+            human,
+            bar: &bar,
+        };
+        if let Some(doc) = seed_document(&run, &jobs, &mut learned, &mut learned_count)? {
+            docs.push(doc);
         }
-        if objects.is_empty() {
-            // Only after a stop: no object of this seed was learned.
-            continue;
-        }
-        let wall_s = objects
-            .values()
-            .map(|o| number_at(o, &["wall_time_s"]))
-            .fold(0.0, f64::max);
-        docs.push(json!({
-            "benchmark": "learn",
-            "seed": seed,
-            "physics": "in-process",
-            "protocol_as_specified": as_specified,
-            "protocol": cfg.protocol.name(),
-            "alphas_deg": cfg.alphas_deg,
-            "trials": cfg.total_trials(),
-            "trials_per_alpha": trials_per_alpha_json(&cfg),
-            "eval_pushes": cfg.eval_pushes,
-            "push_duration_s": cfg.push.push_duration,
-            "objects": objects,
-            "targets_missed": missed,
-            "wall_time_s": wall_s,
-        }));
     }
     bar.finish_and_clear();
     if crate::stop::requested() {
@@ -339,6 +258,147 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
             args.out.display()
         ));
     }
+    say_targets_missed(human, &doc);
+    human.say(&format!("wall time {wall_time_s:.1} s"));
+    if let Some(path) = &args.json {
+        write_json(human, path, &doc, json_to_stdout)?;
+    }
+    Ok(doc)
+}
+
+/// Says where the physics runs, the seeds, alphas, protocol and pushes of the run, and
+/// whether its protocol is the benchmark's.
+fn announce(
+    human: Human,
+    args: &BenchLearnArgs,
+    cfg: &LearnBenchConfig,
+    seeds: &[u64],
+    as_specified: bool,
+) {
+    human.say(
+        "agp bench learn: physics in-process (the rapier2d simulator linked into `agp` as a library, not the `agp-physics` process over shared memory)",
+    );
+    human.say(&format!(
+        "{} {}{}, alphas {} deg, {}, {} unseen pushes, push {} s at {:.0} mm/s",
+        if seeds.len() == 1 { "seed" } else { "seeds" },
+        seed_list(seeds),
+        args.seeds.shard_note(),
+        alphas_text(&cfg.alphas_deg),
+        protocol_text(cfg),
+        cfg.eval_pushes,
+        cfg.push.push_duration,
+        cfg.push.push_speed * 1e3
+    ));
+    if cfg.protocol == TrialProtocol::Active {
+        human.say(
+            "note: the active protocol (issue 33), not the paper's: each trial where the gradient learned so far is least sure",
+        );
+    } else if !as_specified {
+        human.say(&format!(
+            "note: not the benchmark's protocol (alphas {} deg, {PAPER_TRIALS_PER_ALPHA} trials per alpha, at least {MIN_EVAL_PUSHES} unseen pushes): these figures are not benchmark results",
+            alphas_text(&PAPER_ALPHAS_DEG)
+        ));
+    }
+}
+
+/// One seed of a learning run, as [`seed_document`] needs it.
+struct SeedRun<'a> {
+    args: &'a BenchLearnArgs,
+    seed: u64,
+    /// Every seed of the run (all shards').
+    all_seeds: &'a [u64],
+    /// Whether this process runs this seed alone (its tables are then printed).
+    alone: bool,
+    as_specified: bool,
+    human: Human,
+    bar: &'a ProgressBar,
+}
+
+/// The outcome of one (seed, object) of [`learn_objects`].
+type Learned = Result<(ObjectReport, f64), LearnBenchError>;
+
+/// Writes the AG files and plots of one seed's objects, taking their outcomes from
+/// `learned` in the order of `jobs`, and returns the seed's document; `None` when a stop
+/// left no object of the seed learned. `learned_count` counts the objects learned.
+fn seed_document(
+    run: &SeedRun<'_>,
+    jobs: &[Job],
+    learned: &mut impl Iterator<Item = Learned>,
+    learned_count: &mut usize,
+) -> Result<Option<Value>> {
+    let (args, seed) = (run.args, run.seed);
+    let cfg = config(args, seed)?;
+    let out = seed_dir(&args.out, seed, run.all_seeds.len());
+    std::fs::create_dir_all(&out)
+        .with_context(|| format!("--out: cannot create the folder {}", out.display()))?;
+    let mut objects = Map::new();
+    let mut missed = Vec::new();
+    for job in jobs {
+        let outcome = learned.next().context("an object without its outcome")?;
+        let (report, wall_s) = match outcome {
+            // Stopped by a signal: the objects learned are kept, this one is not.
+            Err(LearnBenchError::Stopped { .. }) if crate::stop::requested() => continue,
+            other => other.with_context(|| format!("cannot learn `{}`", job.scenario.name))?,
+        };
+        *learned_count += 1;
+        let (ag_path, plot_path) = write_files(&out, job, &cfg, &report)?;
+        if run.all_seeds.len() > 1 && seed == run.all_seeds[0] {
+            // The run's first seed's gradient is also where `agp bench place` looks by
+            // default (its shard alone writes it).
+            let default = self::ag_path(&args.out, &job.scenario);
+            std::fs::copy(&ag_path, &default).with_context(|| {
+                format!("cannot copy {} to {}", ag_path.display(), default.display())
+            })?;
+        }
+        if run.alone {
+            run.bar.suspend(|| {
+                run.human.say(&format!(
+                    "{}  AG file  {}\n  plot     {}",
+                    table(job, &report, wall_s),
+                    ag_path.display(),
+                    plot_path.display()
+                ));
+            });
+        }
+        missed.extend(
+            report
+                .targets()
+                .into_iter()
+                .filter(|t| !t.met)
+                .map(|t| format!("{}: {} ({})", job.scenario.name, t.what, t.measured)),
+        );
+        objects.insert(
+            job.scenario.name.clone(),
+            object_json(job, &report, wall_s, &ag_path, &plot_path),
+        );
+    }
+    if objects.is_empty() {
+        // Only after a stop: no object of this seed was learned.
+        return Ok(None);
+    }
+    let wall_s = objects
+        .values()
+        .map(|o| number_at(o, &["wall_time_s"]))
+        .fold(0.0, f64::max);
+    Ok(Some(json!({
+        "benchmark": "learn",
+        "seed": seed,
+        "physics": "in-process",
+        "protocol_as_specified": run.as_specified,
+        "protocol": cfg.protocol.name(),
+        "alphas_deg": cfg.alphas_deg,
+        "trials": cfg.total_trials(),
+        "trials_per_alpha": trials_per_alpha_json(&cfg),
+        "eval_pushes": cfg.eval_pushes,
+        "push_duration_s": cfg.push.push_duration,
+        "objects": objects,
+        "targets_missed": missed,
+        "wall_time_s": wall_s,
+    })))
+}
+
+/// Says "every target met", or each target the run's document lists as missed.
+fn say_targets_missed(human: Human, doc: &Value) {
     let missed: Vec<&str> = doc["targets_missed"]
         .as_array()
         .map(|a| a.iter().filter_map(Value::as_str).collect())
@@ -352,20 +412,21 @@ pub fn learn(args: &BenchLearnArgs) -> Result<Value> {
             human.say(&format!("  {m}"));
         }
     }
-    human.say(&format!("wall time {wall_time_s:.1} s"));
-    if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&doc).context("cannot encode the JSON")?;
-        if json_to_stdout {
-            let mut out = std::io::stdout().lock();
-            writeln!(out, "{text}")
-                .and_then(|()| out.flush())
-                .context("cannot write the JSON to standard output")?;
-        } else {
-            write_atomically(path, text.as_bytes())?;
-            human.say(&format!("JSON     {}", path.display()));
-        }
+}
+
+/// Writes the run's document to `path`, or to standard output with `--json -`.
+fn write_json(human: Human, path: &Path, doc: &Value, to_stdout: bool) -> Result<()> {
+    let text = serde_json::to_string_pretty(doc).context("cannot encode the JSON")?;
+    if to_stdout {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{text}")
+            .and_then(|()| out.flush())
+            .context("cannot write the JSON to standard output")?;
+    } else {
+        write_atomically(path, text.as_bytes())?;
+        human.say(&format!("JSON     {}", path.display()));
     }
-    Ok(doc)
+    Ok(())
 }
 
 /// What must be alike in every seed of one learning run.

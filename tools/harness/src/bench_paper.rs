@@ -298,7 +298,46 @@ fn over_seeds(bench: &Value, path: &[&str], scale: f64, decimals: usize) -> Stri
     Spread::of(&values).map_or_else(|| "n/a".to_owned(), |s| s.show(decimals))
 }
 
+/// Prints our figures beside the paper's: the learning, the trajectory, the placement and
+/// every target met or missed.
 fn print_comparison(doc: &Value, episodes: usize) {
+    let own = print_header(doc);
+    let seeds_many = own.len() > 1;
+    let w = if seeds_many { 22 } else { 8 };
+    print_learning(&doc["learn"], w);
+    let (ratio, path_ratios) = print_trajectory(&doc["trajectory"], seeds_many);
+    let place_ok = print_placement(doc, episodes, seeds_many, w);
+    println!(
+        "targets{}:",
+        if seeds_many { " (over all seeds)" } else { "" }
+    );
+    println!(
+        "    {} trajectory ratio affordance / baseline <= {TARGET_TRAJECTORY_RATIO} (paper 0.73), overall: {ratio:.2}",
+        met(ratio <= TARGET_TRAJECTORY_RATIO)
+    );
+    for (name, r) in &path_ratios {
+        println!(
+            "    {} trajectory ratio <= {TARGET_TRAJECTORY_RATIO} on the {name} path: {r:.2}",
+            met(*r <= TARGET_TRAJECTORY_RATIO)
+        );
+    }
+    println!(
+        "    {} placement success of the affordance planner >= {:.0} % on {}",
+        met(place_ok),
+        100.0 * TARGET_PLACE_SUCCESS,
+        PLACE_OBJECTS.join(" and ")
+    );
+    if let Some(missed) = doc["learn"]["targets_missed"].as_array() {
+        for m in missed {
+            println!("    MISSED learning: {}", m.as_str().unwrap_or_default());
+        }
+    }
+    println!("wall time {:.1} s", num(doc, &["wall_time_s"]));
+}
+
+/// The comparison's title line (seeds, shard, where the tasks ran); returns this run's own
+/// seeds.
+fn print_header(doc: &Value) -> Vec<u64> {
     let crate::seeds::SeedLists {
         all: seeds, own, ..
     } = crate::seeds::SeedLists::of(doc);
@@ -319,8 +358,12 @@ fn print_comparison(doc: &Value, episodes: usize) {
     if own.len() > 1 {
         println!("each figure of ours: mean (min-max) over the seeds, each seed its own AG files");
     }
-    let w = if own.len() > 1 { 22 } else { 8 };
-    let learn = &doc["learn"];
+    own
+}
+
+/// The learning's figures: the triangle's largest rotation per alpha beside the paper's,
+/// and each object's prediction errors on unseen pushes; `w` is the figures' width.
+fn print_learning(learn: &Value, w: usize) {
     println!("learning, largest rotation of a single push (triangle), deg:");
     println!("    {:<8} {:>w$} {:>8}", "alpha", "ours", "paper");
     for (alpha, paper) in PAPER_MAX_ROTATION_DEG {
@@ -368,7 +411,11 @@ fn print_comparison(doc: &Value, episodes: usize) {
             w2 = w.max(18)
         );
     }
-    let t = &doc["trajectory"];
+}
+
+/// The trajectory's figures, overall and per path, beside the paper's; returns the overall
+/// ratio and each path's (the target holds on every path of the set, not on their mean).
+fn print_trajectory(t: &Value, seeds_many: bool) -> (f64, Vec<(String, f64)>) {
     let ratio = num(t, &["ratio"]);
     println!(
         "trajectory ({TRAJECTORY_OBJECT}), mean distance of the centroid to the line per point:"
@@ -380,10 +427,9 @@ fn print_comparison(doc: &Value, episodes: usize) {
         over_seeds(t, &["ratio"], 1.0, 2),
         over_seeds(t, &["planners", "model", "mean_error_mm"], 1.0, 2),
     );
-    if own.len() > 1 {
+    if seeds_many {
         println!("           ratio of the mean errors over the seeds {ratio:.2}");
     }
-    // The target holds on every path of the set, not on their mean.
     let mut path_ratios: Vec<(String, f64)> = Vec::new();
     if let Some(paths) = t["paths"].as_object() {
         for (name, p) in paths {
@@ -401,9 +447,15 @@ fn print_comparison(doc: &Value, episodes: usize) {
         "    paper  affordance {PAPER_TRAJECTORY_AFFORDANCE} units, baseline {PAPER_TRAJECTORY_BASELINE} units, ratio {:.2}",
         PAPER_TRAJECTORY_AFFORDANCE / PAPER_TRAJECTORY_BASELINE
     );
+    (ratio, path_ratios)
+}
+
+/// The placement's figures of every planner on each object; returns whether the
+/// affordance planner met its success target on every object.
+fn print_placement(doc: &Value, episodes: usize, seeds_many: bool, w: usize) -> bool {
     println!(
         "placement, {episodes} episodes per planner{}, within the scenario's 10 mm / 10 deg (the paper shows two runs, no figure):",
-        if own.len() > 1 { " and seed" } else { "" }
+        if seeds_many { " and seed" } else { "" }
     );
     println!(
         "    {:<10} {:<12} {:>w$} {:>w$} {:>w$} {:>w$}",
@@ -441,36 +493,7 @@ fn print_comparison(doc: &Value, episodes: usize) {
     println!(
         "         the model (a quasi-static pushing model, limit surface) reads its true pose, shape, mass and frictions"
     );
-    println!(
-        "targets{}:",
-        if own.len() > 1 {
-            " (over all seeds)"
-        } else {
-            ""
-        }
-    );
-    println!(
-        "    {} trajectory ratio affordance / baseline <= {TARGET_TRAJECTORY_RATIO} (paper 0.73), overall: {ratio:.2}",
-        met(ratio <= TARGET_TRAJECTORY_RATIO)
-    );
-    for (name, r) in &path_ratios {
-        println!(
-            "    {} trajectory ratio <= {TARGET_TRAJECTORY_RATIO} on the {name} path: {r:.2}",
-            met(*r <= TARGET_TRAJECTORY_RATIO)
-        );
-    }
-    println!(
-        "    {} placement success of the affordance planner >= {:.0} % on {}",
-        met(place_ok),
-        100.0 * TARGET_PLACE_SUCCESS,
-        PLACE_OBJECTS.join(" and ")
-    );
-    if let Some(missed) = doc["learn"]["targets_missed"].as_array() {
-        for m in missed {
-            println!("    MISSED learning: {}", m.as_str().unwrap_or_default());
-        }
-    }
-    println!("wall time {:.1} s", num(doc, &["wall_time_s"]));
+    place_ok
 }
 
 #[cfg(test)]

@@ -360,16 +360,7 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
     let scenario = Scenario::resolve(&args.scenario)
         .with_context(|| format!("cannot load scenario `{}`", args.scenario))?;
     let chosen = chosen_paths(args, &scenario);
-    let paths: Vec<(NamedPath, Vec<DVec2>)> =
-        chosen.iter().map(|&p| (p, p.points(&scenario))).collect();
-    for (name, points) in &paths {
-        if !(2..=MAX_PATH_POINTS).contains(&points.len()) {
-            bail!(
-                "path `{name}` has {} points; a trajectory takes 2 to {MAX_PATH_POINTS}",
-                points.len()
-            );
-        }
-    }
+    let paths = path_points(&chosen, &scenario)?;
     let ag = resolve_ag(args.ag.as_deref(), &args.scenario, &scenario, &PLANNERS)?;
     // From here on the episode loops poll the stop flag.
     let _checked = stop::checked();
@@ -410,37 +401,17 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         bar: &bar,
     };
     let planned = paths.len() * work.len();
-    // The one-seed documents of `runs` (the pairs of `work` in order, each with the paths
-    // it finished).
-    let seed_docs = |runs: &[(&[EpisodeResult], f64)]| -> Vec<Value> {
-        seeds
-            .iter()
-            .zip(runs.chunks(PLANNERS.len()))
-            .map(|(&seed, pairs)| {
-                let mut per_path: Vec<Map<String, Value>> = vec![Map::new(); paths.len()];
-                let mut wall_s: f64 = 0.0;
-                for (&planner, &(results, planner_wall_s)) in PLANNERS.iter().zip(pairs) {
-                    wall_s = wall_s.max(planner_wall_s);
-                    for ((slot, (_, points)), r) in per_path.iter_mut().zip(&paths).zip(results) {
-                        slot.insert(planner.name().to_owned(), episode_json(points, r));
-                    }
-                }
-                one_seed_doc(
-                    &scenario.name,
-                    seed,
-                    args.in_process,
-                    keep_heading_rad,
-                    &paths,
-                    per_path,
-                    wall_s,
-                )
-            })
-            .collect()
+    let docs = SeedDocs {
+        scenario: &scenario.name,
+        seeds: &seeds,
+        in_process: args.in_process,
+        keep_heading_rad,
+        paths: &paths,
     };
     // What finished, seeds of fewer paths included: the checkpoints and a stop's JSON.
     let partial_doc = |runs: &[(&[EpisodeResult], f64)]| -> Result<Value> {
         let parts = run_parts(
-            &seed_docs(runs),
+            &docs.of(runs),
             "trajectory",
             |_| Value::Null,
             all_seeds.clone(),
@@ -493,13 +464,17 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         ));
     }
     stop::end_checkpoints(args.json.as_deref(), "trajectory");
-    let docs = seed_docs(&runs);
     let first_seed_runs: BTreeMap<PlannerKind, Vec<EpisodeResult>> = PLANNERS
         .iter()
         .zip(&runs)
         .map(|(&p, &(r, _))| (p, r.to_vec()))
         .collect();
-    let parts = run_parts(&docs, "trajectory", trajectory_signature, all_seeds)?;
+    let parts = run_parts(
+        &docs.of(&runs),
+        "trajectory",
+        trajectory_signature,
+        all_seeds,
+    )?;
     let mut doc = assemble(&parts, args.seeds.shard);
     let wall_time_s = wall.elapsed().as_secs_f64();
     doc["wall_time_s"] = json!(wall_time_s);
@@ -515,6 +490,63 @@ pub fn run_trajectory(args: &BenchTrajectoryArgs) -> Result<Value> {
         println!("plot     {}", file.display());
     }
     Ok(doc)
+}
+
+/// The points of each chosen path on `scenario`; refuses a path of fewer than 2 or more
+/// than `MAX_PATH_POINTS` points.
+fn path_points(chosen: &[NamedPath], scenario: &Scenario) -> Result<Vec<(NamedPath, Vec<DVec2>)>> {
+    let paths: Vec<(NamedPath, Vec<DVec2>)> =
+        chosen.iter().map(|&p| (p, p.points(scenario))).collect();
+    for (name, points) in &paths {
+        if !(2..=MAX_PATH_POINTS).contains(&points.len()) {
+            bail!(
+                "path `{name}` has {} points; a trajectory takes 2 to {MAX_PATH_POINTS}",
+                points.len()
+            );
+        }
+    }
+    Ok(paths)
+}
+
+/// What the one-seed documents of a trajectory run are made of, beside its episodes.
+struct SeedDocs<'a> {
+    scenario: &'a str,
+    /// This run's own seeds, in order.
+    seeds: &'a [u64],
+    in_process: bool,
+    keep_heading_rad: Option<f64>,
+    paths: &'a [(NamedPath, Vec<DVec2>)],
+}
+
+impl SeedDocs<'_> {
+    /// The one-seed documents of `runs` (the (seed, planner) pairs of the run in order,
+    /// every planner of a seed in a row, each with the paths it finished).
+    fn of(&self, runs: &[(&[EpisodeResult], f64)]) -> Vec<Value> {
+        self.seeds
+            .iter()
+            .zip(runs.chunks(PLANNERS.len()))
+            .map(|(&seed, pairs)| {
+                let mut per_path: Vec<Map<String, Value>> = vec![Map::new(); self.paths.len()];
+                let mut wall_s: f64 = 0.0;
+                for (&planner, &(results, planner_wall_s)) in PLANNERS.iter().zip(pairs) {
+                    wall_s = wall_s.max(planner_wall_s);
+                    for ((slot, (_, points)), r) in per_path.iter_mut().zip(self.paths).zip(results)
+                    {
+                        slot.insert(planner.name().to_owned(), episode_json(points, r));
+                    }
+                }
+                one_seed_doc(
+                    self.scenario,
+                    seed,
+                    self.in_process,
+                    self.keep_heading_rad,
+                    self.paths,
+                    per_path,
+                    wall_s,
+                )
+            })
+            .collect()
+    }
 }
 
 /// The document of one seed: per path both planners' episodes and the ratio; per planner

@@ -84,9 +84,9 @@ pub enum Phase {
     /// verdict is the judge's.
     Place,
     /// A long-running session on the realtime clock: physics stepping on the wall clock
-    /// and the estimator reading and acknowledging every frame, until `agp down`. It
-    /// stands in for a live session until live sessions exist; no planner runs in it,
-    /// because every planner mode refuses the realtime clock.
+    /// and the estimator reading and acknowledging every frame, until `agp down`. No
+    /// planner runs in it (`bench-soak` measures the pipeline's steady state so);
+    /// `bench-faults` adds a planner serving goals (`--mode serve`) for its live phase.
     Live,
 }
 

@@ -3,8 +3,10 @@
 //!
 //! `agp up` runs physics on the realtime clock (640 steps per second of wall time) and the
 //! estimator reading and acknowledging every frame, until `agp down`; the supervisor's judge
-//! records ground truth the whole time. This stands in for a live session until live
-//! sessions exist (no planner: every planner mode refuses the realtime clock). Every few
+//! records ground truth the whole time. No planner runs in it: the soak measures the
+//! steady state of physics, the estimator and the supervisor on the realtime clock (a live
+//! session with a planner serving goals, `agp-planner --mode serve`, is what `bench-faults`
+//! runs in its live phase; the soak has not been run with one). Every few
 //! seconds the soak reads the resident memory (`VmRSS` of `/proc/PID/status`) of the
 //! supervisor and of every child, and counts the instance's files in `/dev/shm`. It reports
 //! each process's mean resident memory over the first minute and over the last, their
@@ -18,7 +20,7 @@
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use agp_harness::pipeline::{
@@ -94,15 +96,7 @@ fn main() {
 /// Runs the soak and prints its figures; `Some(what)` when a target was missed (memory not
 /// flat within 5 %, the file count not constant, a file left, `agp down` failed).
 fn soak(args: &Args) -> Result<Option<String>> {
-    if !(args.minutes.is_finite() && args.minutes > 0.0 && args.minutes <= 24.0 * 60.0) {
-        bail!(
-            "--minutes {}: give a number of minutes above 0, at most a day",
-            args.minutes
-        );
-    }
-    if !(args.interval_s.is_finite() && (0.2..=600.0).contains(&args.interval_s)) {
-        bail!("--interval-s {}: give 0.2 to 600 seconds", args.interval_s);
-    }
+    check_args(args)?;
     let bins = Bins::new(args.bin_dir.clone())?;
     let work = tempfile::Builder::new()
         .prefix("bench-soak-")
@@ -120,10 +114,48 @@ fn soak(args: &Args) -> Result<Option<String>> {
         max_restarts: 3,
     };
     let launch = spec.write(&bins, work.path())?;
-    let children = Phase::Live.children();
     let mut session = Session::start(&bins, &instance, launch)?;
+    wait_until_running(&mut session, Phase::Live.children())?;
 
-    // Started: every child running and physics publishing.
+    // The files of the last `agp status` (its node and its connection to the control
+    // service) go within moments of its exit; the count starts once they have.
+    sleep_checked(Duration::from_secs(2))?;
+    let samples = sample_until_done(args, &mut session, &instance)?;
+
+    // Down as a user brings it down; then what the instance left.
+    let down_ok = session.down()?;
+    let exit = session.sup().wait_exit(Duration::from_secs(30));
+    let files_left = session.shut();
+    let end = SoakEnd {
+        instance: &instance,
+        down_ok,
+        exit: exit.and_then(|e| e.code()),
+        files_left,
+    };
+    let report = Report::new(&samples);
+    report.print(args, &end);
+    if let Some(path) = &args.json {
+        write_json(args, path, &report, &samples, &end)?;
+    }
+    Ok(report.missed(&end))
+}
+
+/// Refuses a soak length or interval out of range.
+fn check_args(args: &Args) -> Result<()> {
+    if !(args.minutes.is_finite() && args.minutes > 0.0 && args.minutes <= 24.0 * 60.0) {
+        bail!(
+            "--minutes {}: give a number of minutes above 0, at most a day",
+            args.minutes
+        );
+    }
+    if !(args.interval_s.is_finite() && (0.2..=600.0).contains(&args.interval_s)) {
+        bail!("--interval-s {}: give 0.2 to 600 seconds", args.interval_s);
+    }
+    Ok(())
+}
+
+/// Waits (60 s at most) until every child of `children` runs and physics publishes.
+fn wait_until_running(session: &mut Session<'_>, children: &[&str]) -> Result<()> {
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         if let Some(code) = session.ended() {
@@ -140,17 +172,22 @@ fn soak(args: &Args) -> Result<Option<String>> {
                 .and_then(|p| p.rate_per_s)
                 .is_some_and(|r| r > 0.0)
         {
-            break;
+            return Ok(());
         }
         if Instant::now() >= deadline {
             bail!("the session's children were not all running within 60 s");
         }
         sleep_checked(Duration::from_millis(100))?;
     }
+}
 
-    // The files of the last `agp status` (its node and its connection to the control
-    // service) go within moments of its exit; the count starts once they have.
-    sleep_checked(Duration::from_secs(2))?;
+/// Samples the session every `--interval-s` for `--minutes`, printing a line now and
+/// then; fails if the session ends by itself.
+fn sample_until_done(
+    args: &Args,
+    session: &mut Session<'_>,
+    instance: &str,
+) -> Result<Vec<Sample>> {
     let total = Duration::from_secs_f64(args.minutes * 60.0);
     let interval = Duration::from_secs_f64(args.interval_s);
     let started = Instant::now();
@@ -166,60 +203,8 @@ fn soak(args: &Args) -> Result<Option<String>> {
                     .unwrap_or_default()
             );
         }
-        let t_s = started.elapsed().as_secs_f64();
-        // Counted before this sample's `agp status`, whose own node and connection are
-        // files of the instance while it runs.
-        let shm_files = shm_file_count(&instance)?;
-        let mut procs = BTreeMap::new();
-        let sup_pid = session.sup().pid();
-        if let Some(rss) = rss_kb(sup_pid) {
-            procs.insert(
-                "supervisor".to_owned(),
-                ProcSample {
-                    pid: sup_pid,
-                    rss_kb: rss,
-                    restarts: 0,
-                },
-            );
-        }
-        if let Some(s) = session.status()? {
-            for c in &s.processes {
-                if let Some(pid) = c.pid
-                    && let Some(rss) = rss_kb(pid)
-                {
-                    procs.insert(
-                        c.name.clone(),
-                        ProcSample {
-                            pid,
-                            rss_kb: rss,
-                            restarts: c.restarts,
-                        },
-                    );
-                }
-            }
-        }
-        let sample = Sample {
-            t_s,
-            procs,
-            shm_files,
-        };
-        let line = format!(
-            "{:.0}/{:.0} s: {}; {} files in /dev/shm",
-            t_s,
-            total.as_secs_f64(),
-            sample
-                .procs
-                .iter()
-                .map(|(n, p)| format!("{n} {:.1} MB", p.rss_kb as f64 / 1024.0))
-                .collect::<Vec<_>>()
-                .join(", "),
-            sample.shm_files
-        );
-        if std::io::stderr().is_terminal() {
-            eprint!("\r\x1b[2K{line}");
-        } else if samples.len().is_multiple_of(12) {
-            eprintln!("{line}");
-        }
+        let sample = take_sample(session, instance, started.elapsed().as_secs_f64())?;
+        show_progress(&sample, total, samples.len());
         samples.push(sample);
         if started.elapsed() >= total {
             break;
@@ -234,50 +219,98 @@ fn soak(args: &Args) -> Result<Option<String>> {
     if std::io::stderr().is_terminal() {
         eprintln!();
     }
+    Ok(samples)
+}
 
-    // Down as a user brings it down; then what the instance left.
-    let down_ok = session.down()?;
-    let exit = session.sup().wait_exit(Duration::from_secs(30));
-    let files_left = session.shut();
-    let report = Report::new(&samples);
-    report.print(
-        args,
-        &instance,
-        down_ok,
-        exit.and_then(|e| e.code()),
-        files_left,
+/// The instance's file count and the resident memory of the supervisor and of every
+/// child `agp status` lists, at `t_s` into the soak.
+fn take_sample(session: &mut Session<'_>, instance: &str, t_s: f64) -> Result<Sample> {
+    // Counted before this sample's `agp status`, whose own node and connection are
+    // files of the instance while it runs.
+    let shm_files = shm_file_count(instance)?;
+    let mut procs = BTreeMap::new();
+    let sup_pid = session.sup().pid();
+    if let Some(rss) = rss_kb(sup_pid) {
+        procs.insert(
+            "supervisor".to_owned(),
+            ProcSample {
+                pid: sup_pid,
+                rss_kb: rss,
+                restarts: 0,
+            },
+        );
+    }
+    if let Some(s) = session.status()? {
+        for c in &s.processes {
+            if let Some(pid) = c.pid
+                && let Some(rss) = rss_kb(pid)
+            {
+                procs.insert(
+                    c.name.clone(),
+                    ProcSample {
+                        pid,
+                        rss_kb: rss,
+                        restarts: c.restarts,
+                    },
+                );
+            }
+        }
+    }
+    Ok(Sample {
+        t_s,
+        procs,
+        shm_files,
+    })
+}
+
+/// The sample as a line on standard error: rewritten in place on a terminal, else every
+/// twelfth (`taken` samples came before it).
+fn show_progress(sample: &Sample, total: Duration, taken: usize) {
+    let line = format!(
+        "{:.0}/{:.0} s: {}; {} files in /dev/shm",
+        sample.t_s,
+        total.as_secs_f64(),
+        sample
+            .procs
+            .iter()
+            .map(|(n, p)| format!("{n} {:.1} MB", p.rss_kb as f64 / 1024.0))
+            .collect::<Vec<_>>()
+            .join(", "),
+        sample.shm_files
     );
-    if let Some(path) = &args.json {
-        let mut v = report.json(&samples);
-        v["instance"] = json!(instance);
-        v["minutes"] = json!(args.minutes);
-        v["interval_s"] = json!(args.interval_s);
-        v["down_ok"] = json!(down_ok);
-        v["exit"] = json!(exit.and_then(|e| e.code()));
-        v["files_left"] = json!(files_left);
-        let text = serde_json::to_string_pretty(&v).context("cannot format the JSON")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+    if std::io::stderr().is_terminal() {
+        eprint!("\r\x1b[2K{line}");
+    } else if taken.is_multiple_of(12) {
+        eprintln!("{line}");
     }
-    let mut missed: Vec<String> = report
-        .procs
-        .iter()
-        .filter(|(_, p)| !p.flat())
-        .map(|(n, p)| format!("{n} {:+.1} %", (p.ratio() - 1.0) * 100.0))
-        .collect();
-    if report.shm_min != report.shm_max {
-        missed.push(format!(
-            "/dev/shm files {} to {}",
-            report.shm_min, report.shm_max
-        ));
-    }
-    if files_left > 0 {
-        missed.push(format!("{files_left} file(s) left"));
-    }
-    if !down_ok {
-        missed.push("`agp down` failed".to_owned());
-    }
-    Ok((!missed.is_empty()).then(|| missed.join(", ")))
+}
+
+/// How the session ended: `agp down`, the supervisor's exit and what the instance left.
+struct SoakEnd<'a> {
+    instance: &'a str,
+    down_ok: bool,
+    /// The supervisor's exit status (`None`: killed by the tool).
+    exit: Option<i32>,
+    files_left: usize,
+}
+
+/// Writes the figures, every sample and how the session ended as JSON to `path`.
+fn write_json(
+    args: &Args,
+    path: &Path,
+    report: &Report,
+    samples: &[Sample],
+    end: &SoakEnd<'_>,
+) -> Result<()> {
+    let mut v = report.json(samples);
+    v["instance"] = json!(end.instance);
+    v["minutes"] = json!(args.minutes);
+    v["interval_s"] = json!(args.interval_s);
+    v["down_ok"] = json!(end.down_ok);
+    v["exit"] = json!(end.exit);
+    v["files_left"] = json!(end.files_left);
+    let text = serde_json::to_string_pretty(&v).context("cannot format the JSON")?;
+    std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// One process over the soak.
@@ -359,16 +392,15 @@ impl Report {
         }
     }
 
-    fn print(
-        &self,
-        args: &Args,
-        instance: &str,
-        down_ok: bool,
-        exit: Option<i32>,
-        files_left: usize,
-    ) {
+    fn print(&self, args: &Args, end: &SoakEnd<'_>) {
+        let SoakEnd {
+            instance,
+            down_ok,
+            exit,
+            files_left,
+        } = *end;
         println!(
-            "soak of instance `{instance}`: {:.0} s of a realtime session (physics at 640 Hz wall clock, the estimator reading every frame, the judge recording; it stands in for a live session until live sessions exist), a sample every {:.1} s",
+            "soak of instance `{instance}`: {:.0} s of a realtime session (physics at 640 Hz wall clock, the estimator reading every frame, the judge recording; no planner), a sample every {:.1} s",
             self.duration_s, args.interval_s
         );
         if self.overlap {
@@ -428,6 +460,30 @@ impl Report {
         );
     }
 
+    /// What missed its target, if anything: a process's memory not flat within 5 %, the
+    /// file count not constant, a file left, `agp down` failed.
+    fn missed(&self, end: &SoakEnd<'_>) -> Option<String> {
+        let mut missed: Vec<String> = self
+            .procs
+            .iter()
+            .filter(|(_, p)| !p.flat())
+            .map(|(n, p)| format!("{n} {:+.1} %", (p.ratio() - 1.0) * 100.0))
+            .collect();
+        if self.shm_min != self.shm_max {
+            missed.push(format!(
+                "/dev/shm files {} to {}",
+                self.shm_min, self.shm_max
+            ));
+        }
+        if end.files_left > 0 {
+            missed.push(format!("{} file(s) left", end.files_left));
+        }
+        if !end.down_ok {
+            missed.push("`agp down` failed".to_owned());
+        }
+        (!missed.is_empty()).then(|| missed.join(", "))
+    }
+
     fn json(&self, samples: &[Sample]) -> Value {
         let procs: BTreeMap<&String, Value> = self
             .procs
@@ -460,7 +516,7 @@ impl Report {
             .collect();
         json!({
             "duration_s": self.duration_s,
-            "session": "physics on the realtime clock and the estimator reading every frame until `agp down`, standing in for a live session until live sessions exist",
+            "session": "physics on the realtime clock and the estimator reading every frame until `agp down`, no planner",
             "processes": procs,
             "shm_files_min": self.shm_min,
             "shm_files_max": self.shm_max,
