@@ -1370,76 +1370,35 @@ fn is_executable_file(path: &Path) -> bool {
 }
 
 #[cfg(test)]
+#[path = "../tests/fixture/mod.rs"]
+mod fixture;
+
+#[cfg(test)]
 mod tests {
+    use super::fixture::Fixture;
     use super::*;
-    use std::os::unix::fs::PermissionsExt;
 
-    /// A folder holding a launch file's neighbours: an executable `agp-fake` in `bin/`,
-    /// an executable `tools/my-planner` and a scenario file `arena.toml`.
-    struct Fixture {
-        dir: tempfile::TempDir,
-    }
-
-    impl Fixture {
-        fn new() -> Self {
-            let dir = tempfile::tempdir().expect("temp dir");
-            for exe in ["bin/agp-fake", "tools/my-planner"] {
-                let path = dir.path().join(exe);
-                std::fs::create_dir_all(path.parent().expect("parent")).expect("mkdir");
-                std::fs::write(&path, "#!/bin/sh\n").expect("write");
-                std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-                    .expect("chmod");
-            }
-            let pentagon = include_str!("../../../libs/world/scenarios/pentagon.toml");
-            std::fs::write(dir.path().join("arena.toml"), pentagon).expect("write");
-            std::fs::write(dir.path().join("not-exec"), "").expect("write");
-            Self { dir }
-        }
-
-        fn options(&self) -> LaunchOptions {
-            LaunchOptions {
-                instance: None,
-                exe_dir: self.dir.path().join("bin"),
-                remote_checks: None,
-            }
-        }
-
-        fn file(&self) -> PathBuf {
-            self.dir.path().join("launch.toml")
-        }
-
-        fn parse(&self, text: &str) -> Result<LaunchConfig, LaunchConfigParseError> {
-            LaunchConfig::parse(text, &self.file(), &self.options())
-        }
-
-        /// Parses `text`, expecting exactly one fault; returns its line and message.
-        fn fault(&self, text: &str) -> (Option<usize>, String, LaunchFaultKind) {
-            let err = self
-                .parse(text)
-                .expect_err("the launch file must be refused");
-            assert_eq!(err.faults.len(), 1, "faults: {err}");
-            let shown = err.to_string();
-            let fault = err.faults.into_iter().next().expect("one fault");
-            (fault.line, shown, fault.kind)
-        }
+    /// A folder holding a launch file's neighbours: executables `bin/agp-fake` and
+    /// `tools/my-planner`, a scenario file `arena.toml` and a plain file `not-exec`; no
+    /// remote checks (the bridge's are the supervisor's).
+    fn new_fixture() -> Fixture {
+        Fixture::new(&["bin/agp-fake", "tools/my-planner"], None)
     }
 
     #[test]
     fn a_record_key_starts_a_recorder_first_with_the_launch_file_and_physicss_seed() {
-        let f = Fixture::new();
+        let f = new_fixture();
         for exe in ["bin/agp", "bin/agp-physics"] {
-            let path = f.dir.path().join(exe);
-            std::fs::write(&path, "#!/bin/sh\n").expect("write");
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+            f.add_executable(exe);
         }
         let text = "instance = \"rec\"\nscenario = \"triangle\"\nrecord = \"out/run.mcap\"\n\
                     [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\nargs = [\"--seed\", \"9\"]\n";
         let config = f.parse(text).expect("a valid file");
         let rec = &config.processes[0];
         assert_eq!(rec.name, "recorder");
-        assert_eq!(rec.exec, f.dir.path().join("bin/agp"));
+        assert_eq!(rec.exec, f.path().join("bin/agp"));
         assert_eq!(rec.restart.policy, RestartPolicy::Never);
-        let out = f.dir.path().join("out/run.mcap");
+        let out = f.path().join("out/run.mcap");
         assert_eq!(config.record.as_deref(), Some(out.as_path()));
         let launch = std::path::absolute(f.file()).expect("absolute");
         let expected = [
@@ -1456,11 +1415,9 @@ mod tests {
 
     #[test]
     fn a_learn_key_of_online_gives_the_estimator_and_the_planner_their_flags() {
-        let f = Fixture::new();
+        let f = new_fixture();
         for exe in ["bin/agp-estimator", "bin/agp-planner"] {
-            let path = f.dir.path().join(exe);
-            std::fs::write(&path, "#!/bin/sh\n").expect("write");
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+            f.add_executable(exe);
         }
         let text = "instance = \"onl\"\nscenario = \"triangle\"\nlearn = \"online\"\n\
                     [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--reuse\"]\n\
@@ -1488,13 +1445,8 @@ mod tests {
 
     #[test]
     fn a_record_key_beside_a_process_named_recorder_is_refused() {
-        let f = Fixture::new();
-        std::fs::write(f.dir.path().join("bin/agp"), "#!/bin/sh\n").expect("write");
-        std::fs::set_permissions(
-            f.dir.path().join("bin/agp"),
-            std::fs::Permissions::from_mode(0o755),
-        )
-        .expect("chmod");
+        let f = new_fixture();
+        f.add_executable("bin/agp");
         let text = GOOD.replace("name = \"planner\"", "name = \"recorder\"");
         let (line, shown, _) = f.fault(&format!("record = \"run.mcap\"\n{text}"));
         assert_eq!(line, Some(1));
@@ -1528,16 +1480,16 @@ stop_grace_ms = 500
 
     #[test]
     fn a_good_file_resolves_every_path_and_default() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let c = fx.parse(GOOD).expect("valid");
         assert_eq!(c.instance, "t-launch");
         assert_eq!(c.scenario, ScenarioSource::Builtin("triangle".into()));
-        assert_eq!(c.results, fx.dir.path().join("results"));
+        assert_eq!(c.results, fx.path().join("results"));
         assert_eq!(c.clock.mode, ClockMode::Realtime);
         assert_eq!(c.clock.rate_hz, 320.0);
         assert_eq!(c.processes.len(), 2);
         let physics = &c.processes[0];
-        assert_eq!(physics.exec, fx.dir.path().join("bin/agp-fake"));
+        assert_eq!(physics.exec, fx.path().join("bin/agp-fake"));
         assert_eq!(physics.args, ["--seed", "7"]);
         assert_eq!(
             physics.env.get("RUST_LOG").map(String::as_str),
@@ -1549,7 +1501,7 @@ stop_grace_ms = 500
         assert!(!physics.ends_run);
         assert_eq!(physics.stop_grace, DEFAULT_STOP_GRACE);
         let planner = &c.processes[1];
-        assert_eq!(planner.exec, fx.dir.path().join("tools/my-planner"));
+        assert_eq!(planner.exec, fx.path().join("tools/my-planner"));
         assert_eq!(planner.restart, RestartConfig::default());
         assert!(planner.ends_run);
         assert_eq!(planner.stop_grace, Duration::from_millis(500));
@@ -1557,7 +1509,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_missing_clock_means_lockstep_at_640_hz() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let c = fx
             .parse("instance = \"a\"\nscenario = \"square\"\n[[process]]\nname = \"p\"\nexec = \"agp-fake\"\n")
             .expect("valid");
@@ -1567,29 +1519,29 @@ stop_grace_ms = 500
 
     #[test]
     fn a_scenario_file_resolves_against_the_launch_folder() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let c = fx
             .parse(&GOOD.replace("\"triangle\"", "\"arena.toml\""))
             .expect("valid");
         assert_eq!(
             c.scenario,
-            ScenarioSource::File(fx.dir.path().join("arena.toml"))
+            ScenarioSource::File(fx.path().join("arena.toml"))
         );
         assert_eq!(
             c.scenario.env_value(),
-            fx.dir.path().join("arena.toml").into_os_string()
+            fx.path().join("arena.toml").into_os_string()
         );
     }
 
     #[test]
     fn a_scenario_file_that_is_not_a_valid_scenario_is_refused_with_its_own_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let bad = include_str!("../../../libs/world/scenarios/pentagon.toml").replacen(
             "mass_kg",
             "mass_kilos",
             1,
         );
-        std::fs::write(fx.dir.path().join("arena.toml"), &bad).expect("write");
+        std::fs::write(fx.path().join("arena.toml"), &bad).expect("write");
         let (line, shown, kind) = fx.fault(&GOOD.replace("\"triangle\"", "\"arena.toml\""));
         assert!(
             matches!(kind, LaunchFaultKind::BadScenario { .. }),
@@ -1609,7 +1561,7 @@ stop_grace_ms = 500
 
     #[test]
     fn the_instance_override_replaces_the_files_name() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let options = LaunchOptions {
             instance: Some("other".into()),
             ..fx.options()
@@ -1620,7 +1572,7 @@ stop_grace_ms = 500
 
     #[test]
     fn every_child_gets_the_context_variables() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let c = fx.parse(GOOD).expect("valid");
         let env = c.context_env(&c.processes[1]);
         let get = |k: &str| {
@@ -1634,14 +1586,14 @@ stop_grace_ms = 500
         assert_eq!(get("AGP_RATE_HZ").as_deref(), Some("320"));
         assert_eq!(
             get("AGP_RESULTS"),
-            Some(fx.dir.path().join("results").to_string_lossy().into_owned())
+            Some(fx.path().join("results").to_string_lossy().into_owned())
         );
         assert_eq!(get("AGP_PROCESS").as_deref(), Some("planner"));
     }
 
     #[test]
     fn an_unknown_key_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, kind) =
             fx.fault(&GOOD.replace("ends_run = true", "ends_run = true\nrestrat = 3"));
         assert_eq!(line, Some(20));
@@ -1654,7 +1606,7 @@ stop_grace_ms = 500
 
     #[test]
     fn an_unknown_key_inside_an_inline_table_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, _) = fx.fault(&GOOD.replace("max_restarts = 5", "max_restart = 5"));
         assert_eq!(line, Some(14));
         assert!(shown.contains("unknown field `max_restart`"), "{shown}");
@@ -1662,7 +1614,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_toml_syntax_error_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("mode = \"realtime\"", "mode = realtime"));
         assert_eq!(line, Some(6));
         assert!(matches!(kind, LaunchFaultKind::Toml(_)));
@@ -1670,7 +1622,7 @@ stop_grace_ms = 500
 
     #[test]
     fn an_unknown_policy_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, kind) = fx.fault(&GOOD.replace("\"on-failure\"", "\"sometimes\""));
         assert_eq!(line, Some(14));
         assert!(matches!(kind, LaunchFaultKind::UnknownPolicy(ref p) if p == "sometimes"));
@@ -1684,7 +1636,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_negative_rate_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("rate_hz = 320", "rate_hz = -320"));
         assert_eq!(line, Some(7));
         assert!(matches!(kind, LaunchFaultKind::BadRate(r) if r == -320.0));
@@ -1692,14 +1644,14 @@ stop_grace_ms = 500
 
     #[test]
     fn a_zero_rate_is_refused() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (_, _, kind) = fx.fault(&GOOD.replace("rate_hz = 320", "rate_hz = 0.0"));
         assert!(matches!(kind, LaunchFaultKind::BadRate(_)));
     }
 
     #[test]
     fn an_unknown_clock_mode_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("\"realtime\"", "\"fast\""));
         assert_eq!(line, Some(6));
         assert!(matches!(kind, LaunchFaultKind::UnknownClockMode(ref m) if m == "fast"));
@@ -1707,7 +1659,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_negative_max_restarts_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("max_restarts = 5", "max_restarts = -1"));
         assert_eq!(line, Some(14));
         assert!(matches!(kind, LaunchFaultKind::Toml(_)));
@@ -1715,7 +1667,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_bad_instance_name_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("\"t-launch\"", "\"Bad Name\""));
         assert_eq!(line, Some(2));
         assert!(matches!(
@@ -1729,7 +1681,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_bad_instance_override_is_refused() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let options = LaunchOptions {
             instance: Some("x".repeat(40)),
             ..fx.options()
@@ -1744,7 +1696,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_file_without_instance_needs_the_override() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("instance = \"t-launch\"", ""));
         assert_eq!(line, None);
         assert!(matches!(kind, LaunchFaultKind::NoInstance));
@@ -1752,7 +1704,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_duplicate_process_name_is_refused_with_both_lines() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, kind) = fx.fault(&GOOD.replace("\"planner\"", "\"physics\""));
         assert_eq!(line, Some(17));
         assert!(
@@ -1766,7 +1718,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_bad_process_name_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("\"planner\"", "\"my planner\""));
         assert_eq!(line, Some(17));
         assert!(matches!(kind, LaunchFaultKind::BadProcessName(_)));
@@ -1774,7 +1726,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_file_without_process_is_refused() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault("instance = \"a\"\nscenario = \"circle\"\n");
         assert_eq!(line, None);
         assert!(matches!(kind, LaunchFaultKind::NoProcess));
@@ -1782,7 +1734,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_missing_executable_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, kind) = fx.fault(&GOOD.replace("\"agp-fake\"", "\"agp-nothing\""));
         assert_eq!(line, Some(11));
         assert!(matches!(kind, LaunchFaultKind::MissingExecutable { .. }));
@@ -1791,7 +1743,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_file_without_execute_permission_is_refused() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("\"tools/my-planner\"", "\"./not-exec\""));
         assert_eq!(line, Some(18));
         assert!(matches!(kind, LaunchFaultKind::MissingExecutable { .. }));
@@ -1799,7 +1751,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_scenario_neither_built_in_nor_a_file_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, shown, kind) = fx.fault(&GOOD.replace("\"triangle\"", "\"hexagon\""));
         assert_eq!(line, Some(3));
         assert!(matches!(kind, LaunchFaultKind::UnknownScenario { .. }));
@@ -1811,7 +1763,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_reserved_env_variable_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let (line, _, kind) = fx.fault(&GOOD.replace("RUST_LOG", "AGP_INSTANCE"));
         assert_eq!(line, Some(13));
         assert!(matches!(kind, LaunchFaultKind::BadEnv { .. }));
@@ -1819,7 +1771,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_waiting_strategy_that_names_none_is_refused_with_its_line() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let text = GOOD.replace("RUST_LOG = \"info\"", "AGP_WAIT = \"fast\"");
         let (line, message, kind) = fx.fault(&text);
         assert_eq!(line, Some(13));
@@ -1829,7 +1781,7 @@ stop_grace_ms = 500
 
     #[test]
     fn the_instance_waits_as_its_processes_do_or_is_mixed() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let config = fx.parse(GOOD).expect("valid");
         assert_eq!(config.waiting(None), WaitStrategy::default().name());
         assert_eq!(config.waiting(Some(WaitStrategy::Block)), "block");
@@ -1842,7 +1794,7 @@ stop_grace_ms = 500
 
     #[test]
     fn every_fault_of_a_file_is_reported_at_once() {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let text = GOOD
             .replace("\"on-failure\"", "\"sometimes\"")
             .replace("rate_hz = 320", "rate_hz = -1")
@@ -1855,9 +1807,9 @@ stop_grace_ms = 500
 
     #[test]
     fn an_unreadable_file_is_refused() {
-        let fx = Fixture::new();
-        let err = LaunchConfig::load(&fx.dir.path().join("absent.toml"), &fx.options())
-            .expect_err("refused");
+        let fx = new_fixture();
+        let err =
+            LaunchConfig::load(&fx.path().join("absent.toml"), &fx.options()).expect_err("refused");
         assert!(matches!(err.faults[0].kind, LaunchFaultKind::Read(_)));
         assert!(err.to_string().contains("absent.toml"));
     }
@@ -1921,7 +1873,7 @@ stop_grace_ms = 500
 
     #[test]
     fn view_true_adds_agp_view_on_the_instance_after_the_other_processes() {
-        let f = Fixture::new();
+        let f = new_fixture();
         let c = f.parse(&format!("view = true\n{GOOD}")).expect("valid");
         let view = c.processes.last().expect("a process");
         assert_eq!(c.processes.len(), 3);
@@ -1942,7 +1894,7 @@ stop_grace_ms = 500
 
     #[test]
     fn a_view_port_out_of_range_is_refused_on_its_line() {
-        let f = Fixture::new();
+        let f = new_fixture();
         let (line, shown, _) = f.fault(&format!("view = 70000\n{GOOD}"));
         assert_eq!(line, Some(1));
         assert!(

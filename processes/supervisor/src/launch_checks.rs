@@ -85,53 +85,23 @@ impl CheckProcesses for LaunchConfig {
 }
 
 #[cfg(test)]
+use agp_launch::LaunchOptions;
+
+#[cfg(test)]
+#[path = "../../../libs/launch/tests/fixture/mod.rs"]
+mod fixture;
+
+#[cfg(test)]
 mod tests {
     use super::*;
-    use agp_launch::LaunchOptions;
     use std::os::unix::fs::PermissionsExt;
-    use std::path::PathBuf;
 
-    /// A folder holding a launch file and the executables `bin/agp` and `bin/agp-fake`.
-    struct Fixture {
-        dir: tempfile::TempDir,
-    }
+    use super::fixture::Fixture;
 
-    impl Fixture {
-        fn new() -> Self {
-            let dir = tempfile::tempdir().expect("temp dir");
-            for exe in ["bin/agp-fake", "bin/agp"] {
-                let path = dir.path().join(exe);
-                std::fs::create_dir_all(path.parent().expect("parent")).expect("mkdir");
-                std::fs::write(&path, "#!/bin/sh\n").expect("write");
-                std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-                    .expect("chmod");
-            }
-            Self { dir }
-        }
-
-        fn file(&self) -> PathBuf {
-            self.dir.path().join("launch.toml")
-        }
-
-        fn parse(&self, text: &str) -> Result<LaunchConfig, LaunchConfigParseError> {
-            let options = LaunchOptions {
-                instance: None,
-                exe_dir: self.dir.path().join("bin"),
-                remote_checks: Some(BRIDGE_CHECKS),
-            };
-            LaunchConfig::parse(text, &self.file(), &options)
-        }
-
-        /// Parses `text`, expecting exactly one fault; returns its line and message.
-        fn fault(&self, text: &str) -> (Option<usize>, String, LaunchFaultKind) {
-            let err = self
-                .parse(text)
-                .expect_err("the launch file must be refused");
-            assert_eq!(err.faults.len(), 1, "faults: {err}");
-            let shown = err.to_string();
-            let fault = err.faults.into_iter().next().expect("one fault");
-            (fault.line, shown, fault.kind)
-        }
+    /// A folder holding a launch file and the executables `bin/agp` and `bin/agp-fake`,
+    /// its launch files parsed with the bridge's checks.
+    fn new_fixture() -> Fixture {
+        Fixture::new(&["bin/agp-fake", "bin/agp"], Some(BRIDGE_CHECKS))
     }
 
     /// A file whose planner is remote: physics here, the planner reached through the bridge.
@@ -142,11 +112,11 @@ mod tests {
 
     #[test]
     fn a_remote_planner_runs_agp_bridge_on_the_robot_side_in_its_place() {
-        let f = Fixture::new();
+        let f = new_fixture();
         let config = f.parse(REMOTE).expect("a valid file");
         let planner = &config.processes[1];
         assert_eq!(planner.name, "planner");
-        assert_eq!(planner.exec, f.dir.path().join("bin/agp"));
+        assert_eq!(planner.exec, f.path().join("bin/agp"));
         assert!(planner.ends_run);
         let expected = [
             "bridge",
@@ -187,7 +157,7 @@ mod tests {
 
     #[test]
     fn a_remote_process_with_a_bad_role_endpoint_topic_or_an_exec_is_refused_on_its_line() {
-        let f = Fixture::new();
+        let f = new_fixture();
         let cases = [
             (
                 "role = \"planner\"",
@@ -247,8 +217,8 @@ mod tests {
 
     #[test]
     fn a_remote_over_tls_takes_its_key_folder_from_beside_the_launch_file() {
-        let f = Fixture::new();
-        agp_bridge::keygen(&f.dir.path().join("keys"), &[]).expect("keygen");
+        let f = new_fixture();
+        agp_bridge::keygen(&f.path().join("keys"), &[]).expect("keygen");
         let text = REMOTE.replace(
             "listen = \"tcp/127.0.0.1:7447\", insecure = true",
             "listen = \"tls/127.0.0.1:7447\", tls = \"keys\"",
@@ -258,7 +228,7 @@ mod tests {
         let at = args.iter().position(|a| a == "--tls").expect("--tls");
         assert_eq!(
             args[at + 1],
-            f.dir.path().join("keys").display().to_string(),
+            f.path().join("keys").display().to_string(),
             "{args:?}"
         );
         assert!(args.contains(&"tls/127.0.0.1:7447".to_owned()), "{args:?}");
@@ -267,8 +237,8 @@ mod tests {
 
     #[test]
     fn a_remote_without_tls_or_insecure_or_with_an_open_key_is_refused_on_its_line() {
-        let f = Fixture::new();
-        let keys = f.dir.path().join("keys");
+        let f = new_fixture();
+        let keys = f.path().join("keys");
         agp_bridge::keygen(&keys, &[]).expect("keygen");
         let (line, shown, _) =
             f.fault(&REMOTE.replace("\", insecure = true", "\", tls = \"keys\""));

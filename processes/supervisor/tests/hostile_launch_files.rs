@@ -2,12 +2,13 @@
 //! `/dev/zero` in place of the file or of its scenario. Each is refused with the file, the
 //! line and the limit; random mutations of a good file never panic.
 
-use std::os::unix::fs::PermissionsExt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::mpsc;
 use std::time::Duration;
 
-use agp_launch::{LaunchConfig, LaunchConfigParseError, LaunchFaultKind, LaunchOptions};
+use agp_launch::{
+    LaunchConfig, LaunchConfigParseError, LaunchFaultKind, LaunchOptions, RemoteChecks,
+};
 use proptest::prelude::*;
 
 const GOOD: &str = r#"instance = "t-hostile"
@@ -31,55 +32,27 @@ ends_run = true
 stop_grace_ms = 500
 "#;
 
-/// A folder with an executable `bin/agp-fake` and a valid scenario `arena.toml`.
-struct Fixture {
-    dir: tempfile::TempDir,
+#[path = "../../../libs/launch/tests/fixture/mod.rs"]
+mod fixture;
+use fixture::Fixture;
+
+/// A folder with an executable `bin/agp-fake` and a valid scenario `arena.toml`, its
+/// launch files parsed with the bridge's checks.
+fn new_fixture() -> Fixture {
+    Fixture::new(&["bin/agp-fake"], Some(agp_supervisor::BRIDGE_CHECKS))
 }
 
-impl Fixture {
-    fn new() -> Self {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let exe = dir.path().join("bin/agp-fake");
-        std::fs::create_dir_all(exe.parent().expect("parent")).expect("mkdir");
-        std::fs::write(&exe, "#!/bin/sh\n").expect("write");
-        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).expect("chmod");
-        let pentagon = include_str!("../../../libs/world/scenarios/pentagon.toml");
-        std::fs::write(dir.path().join("arena.toml"), pentagon).expect("write");
-        Self { dir }
-    }
-
-    fn options(&self) -> LaunchOptions {
-        LaunchOptions {
-            instance: None,
-            exe_dir: self.dir.path().join("bin"),
-            remote_checks: Some(agp_supervisor::BRIDGE_CHECKS),
-        }
-    }
-
-    fn file(&self) -> PathBuf {
-        self.dir.path().join("launch.toml")
-    }
-
-    fn parse(&self, text: &str) -> Result<LaunchConfig, LaunchConfigParseError> {
-        LaunchConfig::parse(text, &self.file(), &self.options())
-    }
-
-    /// GOOD with `from` replaced by `to`, refused with one fault: its line and the shown
-    /// error.
-    #[track_caller]
-    fn refused(&self, from: &str, to: &str) -> (Option<usize>, String) {
-        assert!(GOOD.contains(from), "test setup: `{from}` not in the file");
-        let err = self
-            .parse(&GOOD.replacen(from, to, 1))
-            .expect_err("the launch file must be refused");
-        assert_eq!(err.faults.len(), 1, "{err}");
-        let shown = err.to_string();
-        assert!(
-            shown.starts_with(&self.file().display().to_string()),
-            "{shown}"
-        );
-        (err.faults[0].line, shown)
-    }
+/// GOOD with `from` replaced by `to`, refused with one fault: its line and the shown
+/// error, which starts with the file's path.
+#[track_caller]
+fn refused(fx: &Fixture, from: &str, to: &str) -> (Option<usize>, String) {
+    assert!(GOOD.contains(from), "test setup: `{from}` not in the file");
+    let (line, shown, _) = fx.fault(&GOOD.replacen(from, to, 1));
+    assert!(
+        shown.starts_with(&fx.file().display().to_string()),
+        "{shown}"
+    );
+    (line, shown)
 }
 
 fn without_hanging<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
@@ -100,15 +73,15 @@ fn make_fifo(path: &Path) {
 
 #[test]
 fn the_file_these_tests_mutate_is_valid() {
-    let fx = Fixture::new();
+    let fx = new_fixture();
     fx.parse(GOOD).expect("valid");
 }
 
 #[test]
 fn a_rate_of_1e12_or_0_001_hz_is_refused_naming_the_limit() {
-    let fx = Fixture::new();
+    let fx = new_fixture();
     for bad in ["1e12", "0.001", "-640", "nan", "inf"] {
-        let (line, shown) = fx.refused("rate_hz = 640", &format!("rate_hz = {bad}"));
+        let (line, shown) = refused(&fx, "rate_hz = 640", &format!("rate_hz = {bad}"));
         assert_eq!(line, Some(6), "{shown}");
         assert!(
             shown.contains("`rate_hz` must be a positive number")
@@ -124,7 +97,7 @@ fn a_rate_of_1e12_or_0_001_hz_is_refused_naming_the_limit() {
 
 #[test]
 fn a_huge_restart_count_backoff_or_stop_grace_is_refused_naming_the_limit() {
-    let fx = Fixture::new();
+    let fx = new_fixture();
     let cases = [
         (
             "max_restarts = 5",
@@ -152,7 +125,7 @@ fn a_huge_restart_count_backoff_or_stop_grace_is_refused_naming_the_limit() {
         ),
     ];
     for (from, to, want, words) in cases {
-        let (line, shown) = fx.refused(from, to);
+        let (line, shown) = refused(&fx, from, to);
         assert_eq!(line, Some(want), "{shown}");
         assert!(shown.contains(words), "`{shown}` does not say {words}");
     }
@@ -171,8 +144,8 @@ fn a_huge_restart_count_backoff_or_stop_grace_is_refused_naming_the_limit() {
 
 #[test]
 fn a_fifo_as_a_launch_file_is_refused_without_blocking() {
-    let fx = Fixture::new();
-    let fifo = fx.dir.path().join("fifo.toml");
+    let fx = new_fixture();
+    let fifo = fx.path().join("fifo.toml");
     make_fifo(&fifo);
     let options = fx.options();
     let shown = {
@@ -190,8 +163,8 @@ fn a_fifo_as_a_launch_file_is_refused_without_blocking() {
 
 #[test]
 fn a_link_to_dev_zero_as_a_launch_file_is_refused_without_reading() {
-    let fx = Fixture::new();
-    let link = fx.dir.path().join("zero.toml");
+    let fx = new_fixture();
+    let link = fx.path().join("zero.toml");
     std::os::unix::fs::symlink("/dev/zero", &link).expect("symlink");
     let options = fx.options();
     let err = without_hanging(move || LaunchConfig::load(&link, &options).map(|_| ()))
@@ -209,8 +182,8 @@ fn a_link_to_dev_zero_as_a_launch_file_is_refused_without_reading() {
 
 #[test]
 fn a_fifo_as_the_scenario_of_a_launch_file_is_refused_without_blocking() {
-    let fx = Fixture::new();
-    make_fifo(&fx.dir.path().join("pipe.toml"));
+    let fx = new_fixture();
+    make_fifo(&fx.path().join("pipe.toml"));
     let file = fx.file();
     let options = fx.options();
     let text = GOOD.replace("arena.toml", "pipe.toml");
@@ -304,7 +277,7 @@ proptest! {
     fn a_mutated_launch_file_never_panics_and_every_fault_names_the_file_and_its_line(
         edits in proptest::collection::vec(edit(), 1..4)
     ) {
-        let fx = Fixture::new();
+        let fx = new_fixture();
         let text = apply(GOOD, &edits);
         if let Err(err) = fx.parse(&text) {
             let file = fx.file().display().to_string();
