@@ -696,6 +696,33 @@ pub fn triangle_ring_launch(
     )
 }
 
+/// A lockstep launch file of the triangle: physics, `agp-estimator --load ag`, and the
+/// workspace's `planner` binary with `planner_args` (words for `sh`), ending the run, started
+/// through `sh` once the file `gate` exists in the run's folder (a recorder or a reader the
+/// test starts first makes it). `top` goes among the top-level keys as is (such as
+/// `record = "run.mcap"\n`).
+#[track_caller]
+pub fn gated_triangle_launch(
+    instance: &str,
+    ag: &Path,
+    top: &str,
+    gate: &str,
+    planner: &str,
+    planner_args: &str,
+) -> String {
+    format!(
+        "instance = \"{instance}\"\nscenario = \"triangle\"\n{top}\n[clock]\nmode = \"lockstep\"\n\n\
+         [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\n\
+         [[process]]\nname = \"estimator\"\nexec = \"{}\"\nargs = [\"--load\", \"{}\"]\n\n\
+         [[process]]\nname = \"planner\"\nexec = \"/bin/sh\"\n\
+         args = [\"-c\", \"while [ ! -e {gate} ]; do sleep 0.01; done; exec {} {planner_args}\"]\n\
+         ends_run = true\n",
+        bin_path("agp-estimator").display(),
+        ag.display(),
+        bin_path(planner).display(),
+    )
+}
+
 /// One process's steady-state allocation line (`agp_runtime::alloc_count::report`).
 #[derive(Debug, Clone, Copy)]
 pub struct AllocCounts {

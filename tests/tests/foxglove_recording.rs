@@ -21,7 +21,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use agp_recording::{MESSAGE_ENCODING, Recording, TOPIC_COUNT};
-use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
+use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag, run_agp};
 use serde_json::Value;
 
 /// Safety net of every wait; the checks never depend on it.
@@ -67,33 +67,13 @@ fn tool(script: &str, args: &[&str]) -> String {
 /// The placement's launch: physics, the estimator serving the learned triangle, and the
 /// affordance planner, which starts once the recorder listens (`record.ready`).
 fn launch(instance: &str, ag: &Path) -> String {
-    let planner = bin_path("agp-planner");
-    let estimator = bin_path("agp-estimator");
-    format!(
-        r#"instance = "{instance}"
-scenario = "triangle"
-
-[clock]
-mode = "lockstep"
-
-[[process]]
-name = "physics"
-exec = "agp-physics"
-
-[[process]]
-name = "estimator"
-exec = "{estimator}"
-args = ["--load", "{ag}"]
-
-[[process]]
-name = "planner"
-exec = "/bin/sh"
-args = ["-c", "while [ ! -e record.ready ]; do sleep 0.01; done; exec {planner} --mode place --planner affordance"]
-ends_run = true
-"#,
-        ag = ag.display(),
-        planner = planner.display(),
-        estimator = estimator.display()
+    agp_tests::gated_triangle_launch(
+        instance,
+        ag,
+        "",
+        "record.ready",
+        "agp-planner",
+        "--mode place --planner affordance",
     )
 }
 

@@ -140,16 +140,101 @@ fn swap(dir: &Path, name: &str, exec: &str, args: &[String]) {
     run.assert_success("`agp swap planner`");
 }
 
-fn down(dir: &Path, name: &str, up: AgpUp) {
-    run_agp(dir, &["down", "--instance", name], TIMEOUT).assert_success("`agp down`");
-    let end = up.wait(TIMEOUT);
-    assert!(end.status.success(), "{}\n{}", end.stdout, end.stderr);
-    assert_eq!(
-        count_instance_files(name),
-        0,
-        "files of `{name}` remain: {:?}",
-        Instance::new(name).expect("a valid name").files()
-    );
+/// The `agp` package's interpreter and an executable wrapper of it (`python_wrapper`),
+/// in a folder of its own kept as long as this.
+struct Python {
+    wrapper: String,
+    _dir: tempfile::TempDir,
+}
+
+impl Python {
+    /// Fails naming the set-up command when there is no interpreter with the package.
+    fn new() -> Self {
+        let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
+        let dir = tempfile::tempdir().expect("a folder");
+        let wrapper = python_wrapper(dir.path(), &python);
+        Self { wrapper, _dir: dir }
+    }
+}
+
+/// A session under `agp up` of a launch file in a folder of its own, past its start-up
+/// (three processes started), brought down if the test panics; physics's step log
+/// `steps.log` read as it grows.
+struct Live {
+    up: AgpUp,
+    _guard: DownOnPanic,
+    dir: LaunchDir,
+    log: StepLog,
+    name: &'static str,
+}
+
+impl Live {
+    fn start(name: &'static str, launch: &str) -> Self {
+        let dir = LaunchDir::new(launch);
+        let guard = DownOnPanic::new(dir.path(), name);
+        let mut up = AgpUp::start(&dir.launch(), &[]);
+        up.wait_for_lines("started", 3, TIMEOUT);
+        let log = StepLog::new(dir.path().join("steps.log"));
+        Self {
+            up,
+            _guard: guard,
+            dir,
+            log,
+            name,
+        }
+    }
+
+    /// `agp goal --place X Y THETA` (mm, mm, deg); panics unless it was queued.
+    #[track_caller]
+    fn goal(&self, place: [&str; 3]) {
+        let mut words = vec!["goal", "--instance", self.name, "--place"];
+        words.extend_from_slice(&place);
+        run_agp(self.dir.path(), &words, TIMEOUT).assert_success("`agp goal`");
+    }
+
+    /// `agp swap planner` to `exec` with `args`; panics unless it succeeded.
+    #[track_caller]
+    fn swap(&self, exec: &str, args: &[String]) {
+        swap(self.dir.path(), self.name, exec, args);
+    }
+
+    /// Polls `agp status` until `n` goals are done; returns them.
+    #[track_caller]
+    fn goals_done(&self, n: usize) -> Vec<Value> {
+        wait_goals_done(self.dir.path(), self.name, n)
+    }
+
+    /// `agp status`'s pid of process `process`.
+    #[track_caller]
+    fn pid_of(&self, process: &str) -> u32 {
+        agp_tests::status_entry(&status_json(self.dir.path(), self.name, TIMEOUT), process)["pid"]
+            .as_u64()
+            .and_then(|p| u32::try_from(p).ok())
+            .unwrap_or_else(|| panic!("{process} runs"))
+    }
+
+    /// `agp down`; panics unless the supervisor exits 0 leaving no file of the instance.
+    /// Returns the step log as read to the end.
+    #[track_caller]
+    fn down(self) -> Vec<(u64, u64)> {
+        let Self {
+            up,
+            _guard,
+            dir,
+            mut log,
+            name,
+        } = self;
+        run_agp(dir.path(), &["down", "--instance", name], TIMEOUT).assert_success("`agp down`");
+        let end = up.wait(TIMEOUT);
+        assert!(end.status.success(), "{}\n{}", end.stdout, end.stderr);
+        assert_eq!(
+            count_instance_files(name),
+            0,
+            "files of `{name}` remain: {:?}",
+            Instance::new(name).expect("a valid name").files()
+        );
+        log.poll().to_vec()
+    }
 }
 
 #[test]
@@ -182,9 +267,7 @@ fn the_push_level_python_planner_places_the_triangle_from_the_shipped_launch_fil
 #[test]
 fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_back_mid_goal() {
     let name = "t-py-push-swap";
-    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
-    let wrappers = tempfile::tempdir().expect("a folder");
-    let python_s = python_wrapper(wrappers.path(), &python);
+    let python = Python::new();
     let ag = learned_ag("triangle");
     let rust_args: Vec<String> = ["--mode", "serve", "--planner", "affordance"]
         .map(String::from)
@@ -193,32 +276,24 @@ fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_b
         example("push_planner.py").display().to_string(),
         "--serve".to_owned(),
     ];
-    let dir = LaunchDir::new(&live_launch(name, &ag, "agp-planner", &rust_args));
-    let _guard = DownOnPanic::new(dir.path(), name);
-    let mut up = AgpUp::start(&dir.launch(), &[]);
-    up.wait_for_lines("started", 3, TIMEOUT);
-    let mut log = StepLog::new(dir.path().join("steps.log"));
-    let goal = run_agp(
-        dir.path(),
-        &["goal", "--instance", name, "--place", "300", "150", "90"],
-        TIMEOUT,
-    );
-    goal.assert_success("`agp goal`");
+    let mut live = Live::start(name, &live_launch(name, &ag, "agp-planner", &rust_args));
+    live.goal(["300", "150", "90"]);
     // Mid-goal: the Rust planner has found the object and pushed (a circling is about
     // 7,000 steps); the Python one takes over, and after a push or two the Rust one again.
+    let Live { up, log, .. } = &mut live;
     up.until("the Rust planner's first 12,000 steps", TIMEOUT, || {
         log.len() >= 12_000
     });
-    swap(dir.path(), name, &python_s, &py_args);
+    live.swap(&python.wrapper, &py_args);
+    let Live { up, log, .. } = &mut live;
     up.until("the Python planner's 15,000 steps", TIMEOUT, || {
         log.poll().iter().filter(|l| l.1 == 1).count() >= 15_000
     });
     let rust = agp_tests::bin_path("agp-planner");
-    swap(dir.path(), name, &rust.display().to_string(), &rust_args);
-    let done = wait_goals_done(dir.path(), name, 1);
+    live.swap(&rust.display().to_string(), &rust_args);
+    let done = live.goals_done(1);
     let g = &done[0];
-    down(dir.path(), name, up);
-    let log = log.poll();
+    let log = &live.down();
     assert_every_step_applied_once(log);
     let epochs: std::collections::BTreeSet<u64> = log.iter().map(|l| l.1).collect();
     assert_eq!(
@@ -240,35 +315,22 @@ fn a_live_goal_is_reached_with_the_rust_planner_swapped_for_the_python_one_and_b
 #[test]
 fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_without_losing_a_step() {
     let name = "t-py-wheels-serve";
-    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
-    let wrappers = tempfile::tempdir().expect("a folder");
-    let python_s = python_wrapper(wrappers.path(), &python);
+    let python = Python::new();
     let args = vec![
         example("wheel_planner.py").display().to_string(),
         "--serve".to_owned(),
     ];
-    let dir = LaunchDir::new(&live_launch(
-        name,
-        &learned_ag("triangle"),
-        &python_s,
-        &args,
-    ));
-    let _guard = DownOnPanic::new(dir.path(), name);
-    let mut up = AgpUp::start(&dir.launch(), &[]);
-    up.wait_for_lines("started", 3, TIMEOUT);
-    let mut log = StepLog::new(dir.path().join("steps.log"));
-    for place in [["300", "150", "90"], ["200", "0", "0"]] {
-        let mut words = vec!["goal", "--instance", name, "--place"];
-        words.extend_from_slice(&place);
-        run_agp(dir.path(), &words, TIMEOUT).assert_success("`agp goal`");
-    }
+    let launch = live_launch(name, &learned_ag("triangle"), &python.wrapper, &args);
+    let mut live = Live::start(name, &launch);
+    live.goal(["300", "150", "90"]);
+    live.goal(["200", "0", "0"]);
     // Mid-goal 1 (the nudge takes about 1,800 steps): the same planner again, hot.
+    let Live { up, log, .. } = &mut live;
     let before = log.len();
     up.until("goal 1 under way", TIMEOUT, || log.len() >= before + 600);
-    swap(dir.path(), name, &python_s, &args);
-    let done = wait_goals_done(dir.path(), name, 2);
-    down(dir.path(), name, up);
-    let log = log.poll();
+    live.swap(&python.wrapper, &args);
+    let done = live.goals_done(2);
+    let log = &live.down();
     assert_every_step_applied_once(log);
     assert!(
         log.iter().any(|l| l.1 == 1),
@@ -291,9 +353,7 @@ fn the_wheel_level_python_planner_serves_two_goals_and_hands_over_mid_goal_witho
 #[test]
 fn the_wheel_level_python_planner_carries_on_after_a_physics_restart() {
     let name = "t-py-wheels-restart";
-    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
-    let wrappers = tempfile::tempdir().expect("a folder");
-    let python_s = python_wrapper(wrappers.path(), &python);
+    let python = Python::new();
     let args = [
         format!("\"{}\"", example("wheel_planner.py").display()),
         "\"--serve\"".to_owned(),
@@ -303,38 +363,23 @@ fn the_wheel_level_python_planner_carries_on_after_a_physics_restart() {
          [[process]]\nname = \"physics\"\nexec = \"agp-physics\"\n\
          restart = {{ policy = \"on-failure\", max_restarts = 2, backoff_ms = 10 }}\n\n\
          [[process]]\nname = \"estimator\"\nexec = \"agp-estimator\"\nargs = [\"--load\", \"{}\"]\n\n\
-         [[process]]\nname = \"planner\"\nexec = \"{python_s}\"\nargs = [{}]\n",
+         [[process]]\nname = \"planner\"\nexec = \"{}\"\nargs = [{}]\n",
         learned_ag("triangle").display(),
+        python.wrapper,
         args.join(", ")
     );
-    let dir = LaunchDir::new(&text);
-    let _guard = DownOnPanic::new(dir.path(), name);
-    let mut up = AgpUp::start(&dir.launch(), &[]);
-    up.wait_for_lines("started", 3, TIMEOUT);
-    run_agp(
-        dir.path(),
-        &["goal", "--instance", name, "--place", "300", "150", "90"],
-        TIMEOUT,
-    )
-    .assert_success("`agp goal`");
-    wait_goals_done(dir.path(), name, 1);
+    let mut live = Live::start(name, &text);
+    live.goal(["300", "150", "90"]);
+    live.goals_done(1);
     // Physics dies (SIGKILL); the supervisor starts it again, a new world from the
     // scenario's start. The planner goes on driving it: the next goal is served.
-    let pid = agp_tests::status_entry(&status_json(dir.path(), name, TIMEOUT), "physics")["pid"]
-        .as_u64()
-        .and_then(|p| i32::try_from(p).ok())
-        .expect("physics runs");
+    let pid = i32::try_from(live.pid_of("physics")).expect("a pid");
     // SAFETY: kill(2) of a child of the supervisor this test started, by its pid.
     assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
-    up.wait_for_lines("physics: restarted", 1, TIMEOUT);
-    run_agp(
-        dir.path(),
-        &["goal", "--instance", name, "--place", "200", "0", "0"],
-        TIMEOUT,
-    )
-    .assert_success("`agp goal`");
-    let done = wait_goals_done(dir.path(), name, 2);
-    down(dir.path(), name, up);
+    live.up.wait_for_lines("physics: restarted", 1, TIMEOUT);
+    live.goal(["200", "0", "0"]);
+    let done = live.goals_done(2);
+    live.down();
     assert_eq!(done[1]["end"], "done", "{:?}", done);
 }
 
@@ -350,28 +395,15 @@ fn children(pid: u32) -> Vec<u32> {
 #[test]
 fn the_skills_executor_never_outlives_the_python_planner_that_started_it() {
     let name = "t-py-push-orphan";
-    let python = agp_tests::python_with(&["agp", "iceoryx2", "numpy"]);
-    let wrappers = tempfile::tempdir().expect("a folder");
-    let python_s = python_wrapper(wrappers.path(), &python);
+    let python = Python::new();
     let args = vec![
         example("push_planner.py").display().to_string(),
         "--serve".to_owned(),
     ];
-    let dir = LaunchDir::new(&live_launch(
-        name,
-        &learned_ag("triangle"),
-        &python_s,
-        &args,
-    ));
-    let _guard = DownOnPanic::new(dir.path(), name);
-    let mut up = AgpUp::start(&dir.launch(), &[]);
-    up.wait_for_lines("started", 3, TIMEOUT);
-    up.wait_for_lines("serving the goals", 1, TIMEOUT);
-    let planner =
-        agp_tests::status_entry(&status_json(dir.path(), name, TIMEOUT), "planner")["pid"]
-            .as_u64()
-            .and_then(|p| u32::try_from(p).ok())
-            .expect("the planner runs");
+    let launch = live_launch(name, &learned_ag("triangle"), &python.wrapper, &args);
+    let mut live = Live::start(name, &launch);
+    live.up.wait_for_lines("serving the goals", 1, TIMEOUT);
+    let planner = live.pid_of("planner");
     // The wrapper execs the interpreter: the planner's pid is Python's, its child the
     // executor `agp-planner --skills`.
     let executor = children(planner);
@@ -396,8 +428,8 @@ fn the_skills_executor_never_outlives_the_python_planner_that_started_it() {
         std::thread::sleep(Duration::from_millis(10));
     }
     // The supervisor may already be ending the run its planner left: down if it is not.
-    let _ = run_agp(dir.path(), &["down", "--instance", name], TIMEOUT);
-    let end = up.wait(TIMEOUT);
+    let _ = run_agp(live.dir.path(), &["down", "--instance", name], TIMEOUT);
+    let end = live.up.wait(TIMEOUT);
     assert!(
         agp_tests::process_is_gone(executor),
         "the executor outlived the run: {}",

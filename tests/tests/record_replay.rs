@@ -11,7 +11,7 @@ use agp_runtime::Instance;
 use agp_shared_types::{
     GRIDS_PER_ALPHA, GroundTruth, IrFrame, LearnEvent, ObjectEstimate, ServiceNames,
 };
-use agp_tests::{AgpUp, LaunchDir, bin_path, count_instance_files, learned_ag, run_agp};
+use agp_tests::{AgpUp, LaunchDir, count_instance_files, learned_ag, run_agp};
 
 /// Safety net only: the run takes well under a second.
 const TIMEOUT: Duration = Duration::from_secs(120);
@@ -27,34 +27,13 @@ static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 /// Nothing runs at another priority: the recorder's buffers (`agp_runtime::TAP_DEPTH`)
 /// hold seconds of the ring at full lockstep speed.
 fn launch(instance: &str, ag: &std::path::Path, planner: &str, planner_args: &str) -> String {
-    let planner = bin_path(planner);
-    let estimator = bin_path("agp-estimator");
-    format!(
-        r#"instance = "{instance}"
-scenario = "triangle"
-record = "run.mcap"
-
-[clock]
-mode = "lockstep"
-
-[[process]]
-name = "physics"
-exec = "agp-physics"
-
-[[process]]
-name = "estimator"
-exec = "{estimator}"
-args = ["--load", "{ag}"]
-
-[[process]]
-name = "planner"
-exec = "/bin/sh"
-args = ["-c", "while [ ! -e truth.ready ]; do sleep 0.01; done; exec {planner} {planner_args}"]
-ends_run = true
-"#,
-        ag = ag.display(),
-        planner = planner.display(),
-        estimator = estimator.display()
+    agp_tests::gated_triangle_launch(
+        instance,
+        ag,
+        "record = \"run.mcap\"\n",
+        "truth.ready",
+        planner,
+        planner_args,
     )
 }
 

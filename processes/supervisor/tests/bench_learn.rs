@@ -1,7 +1,7 @@
 //! `agp bench learn` (src/bench_learn.rs), called through its clap arguments in-process on
 //! a quick protocol: what a user and the scripts reading the JSON rely on.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use agp_affordance::AffordanceGradient;
@@ -24,6 +24,30 @@ fn args(line: &[&str]) -> BenchLearnArgs {
 
 fn path_arg(p: &Path) -> String {
     p.display().to_string()
+}
+
+/// A temporary folder for one run: its JSON `learn.json`, its AG files and plots in `ags/`.
+struct Folder {
+    dir: tempfile::TempDir,
+    json: PathBuf,
+    out: PathBuf,
+}
+
+impl Folder {
+    fn new() -> Self {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let json = dir.path().join("learn.json");
+        let out = dir.path().join("ags");
+        Self { dir, json, out }
+    }
+
+    /// Runs `agp bench learn` with `line`, its JSON and AG files in this folder.
+    fn learn(&self, line: &[&str]) -> anyhow::Result<ExitCode> {
+        let (json, out) = (path_arg(&self.json), path_arg(&self.out));
+        let mut line = line.to_vec();
+        line.extend(["--json", json.as_str(), "--out", out.as_str()]);
+        run(&args(&line))
+    }
 }
 
 #[test]
@@ -75,27 +99,23 @@ fn scenarios_are_given_as_a_comma_list_or_by_repeating_the_flag() {
 
 #[test]
 fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let json = dir.path().join("learn.json");
-    let out = dir.path().join("ags");
-    let code = run(&args(&[
-        "--seed",
-        "7",
-        "--scenario",
-        "triangle",
-        "--trials",
-        "30",
-        "--eval",
-        "20",
-        "--json",
-        &path_arg(&json),
-        "--out",
-        &path_arg(&out),
-    ]))
-    .expect("the bench runs");
+    let f = Folder::new();
+    let code = f
+        .learn(&[
+            "--seed",
+            "7",
+            "--scenario",
+            "triangle",
+            "--trials",
+            "30",
+            "--eval",
+            "20",
+        ])
+        .expect("the bench runs");
     assert_eq!(code, ExitCode::SUCCESS);
+    let out = &f.out;
 
-    let text = std::fs::read_to_string(&json).expect("the JSON file is written");
+    let text = std::fs::read_to_string(&f.json).expect("the JSON file is written");
     let doc: Value = serde_json::from_str(&text).expect("valid JSON");
     assert_eq!(doc["benchmark"], "learn");
     assert_eq!(doc["seed"], 7);
@@ -149,7 +169,7 @@ fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
     let svg = std::fs::read_to_string(out.join("triangle.svg")).expect("the plot is written");
     assert!(svg.contains("<svg"), "not an SVG");
     // Nothing else is left in the folders (no temporary or probe files).
-    let mut names: Vec<String> = std::fs::read_dir(&out)
+    let mut names: Vec<String> = std::fs::read_dir(out)
         .expect("the out folder")
         .map(|e| {
             e.expect("an entry")
@@ -164,8 +184,8 @@ fn a_quick_run_writes_the_contract_json_an_ag_file_and_its_plot() {
 
 #[test]
 fn a_bad_scenario_file_is_one_clear_error_and_nothing_is_written() {
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let bad = dir.path().join("bowtie.toml");
+    let f = Folder::new();
+    let bad = f.dir.path().join("bowtie.toml");
     std::fs::write(
         &bad,
         "name = \"bowtie\"\n[object]\nshape = \"polygon\"\n\
@@ -173,21 +193,16 @@ fn a_bad_scenario_file_is_one_clear_error_and_nothing_is_written() {
          mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
     )
     .expect("write the scenario");
-    let json = dir.path().join("learn.json");
-    let out = dir.path().join("ags");
-    let err = run(&args(&[
-        "--scenario",
-        &format!("triangle,{}", bad.display()),
-        "--json",
-        &path_arg(&json),
-        "--out",
-        &path_arg(&out),
-    ]))
-    .expect_err("the file is refused");
+    let err = f
+        .learn(&["--scenario", &format!("triangle,{}", bad.display())])
+        .expect_err("the file is refused");
     let message = format!("{err:#}");
     assert!(message.contains("bowtie.toml"), "{message}");
-    assert!(!json.exists(), "a JSON file was written");
-    assert!(!out.exists(), "the out folder was created before the check");
+    assert!(!f.json.exists(), "a JSON file was written");
+    assert!(
+        !f.out.exists(),
+        "the out folder was created before the check"
+    );
 }
 
 #[test]
@@ -212,22 +227,17 @@ fn an_out_folder_that_cannot_be_created_fails_before_any_learning() {
 
 #[test]
 fn two_scenarios_naming_the_same_object_are_refused() {
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let twin = dir.path().join("twin.toml");
+    let f = Folder::new();
+    let twin = f.dir.path().join("twin.toml");
     std::fs::write(
         &twin,
         "name = \"triangle\"\n[object]\nshape = \"circle\"\nradius_mm = 30\n\
          mass_kg = 0.1\nfloor_friction = 0.4\ncontact_friction = 0.3\n",
     )
     .expect("write the scenario");
-    let out = dir.path().join("ags");
-    let err = run(&args(&[
-        "--scenario",
-        &format!("triangle,{}", twin.display()),
-        "--out",
-        &path_arg(&out),
-    ]))
-    .expect_err("refused");
+    let err = f
+        .learn(&["--scenario", &format!("triangle,{}", twin.display())])
+        .expect_err("refused");
     assert!(format!("{err:#}").contains("overwrite"), "{err:#}");
 }
 
@@ -237,22 +247,13 @@ fn two_scenarios_naming_the_same_object_are_refused() {
 /// per object in the test build.
 #[test]
 fn the_square_and_the_circle_meet_every_learning_target_with_the_papers_protocol() {
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let json = dir.path().join("learn.json");
-    let out = dir.path().join("ags");
-    let code = run(&args(&[
-        "--scenario",
-        "square,circle",
-        "--seed",
-        "7",
-        "--json",
-        &path_arg(&json),
-        "--out",
-        &path_arg(&out),
-    ]))
-    .expect("the bench runs");
+    let f = Folder::new();
+    let code = f
+        .learn(&["--scenario", "square,circle", "--seed", "7"])
+        .expect("the bench runs");
     assert_eq!(code, ExitCode::SUCCESS);
-    let text = std::fs::read_to_string(&json).expect("the JSON file is written");
+    let out = &f.out;
+    let text = std::fs::read_to_string(&f.json).expect("the JSON file is written");
     let doc: Value = serde_json::from_str(&text).expect("valid JSON");
     assert_eq!(doc["protocol_as_specified"], true);
     for object in ["square", "circle"] {
@@ -325,8 +326,8 @@ fn the_agp_binary_exits_non_zero_with_one_line_for_a_missing_scenario_file() {
 
 #[test]
 fn an_object_too_large_for_the_gradient_fails_before_any_object_is_learned() {
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let huge = dir.path().join("huge.toml");
+    let f = Folder::new();
+    let huge = f.dir.path().join("huge.toml");
     std::fs::write(
         &huge,
         "name = \"huge\"\n[object]\nshape = \"circle\"\nradius_mm = 400\n\
@@ -334,18 +335,13 @@ fn an_object_too_large_for_the_gradient_fails_before_any_object_is_learned() {
          [robot]\nstart = { x_mm = -700, y_mm = 0, theta_deg = 0 }\n",
     )
     .expect("write the scenario");
-    let out = dir.path().join("ags");
-    let err = run(&args(&[
-        "--scenario",
-        &format!("triangle,{}", huge.display()),
-        "--out",
-        &path_arg(&out),
-    ]))
-    .expect_err("refused");
+    let err = f
+        .learn(&["--scenario", &format!("triangle,{}", huge.display())])
+        .expect_err("refused");
     let message = format!("{err:#}");
     assert!(message.contains("`huge` is too large"), "{message}");
     assert!(message.contains("huge.toml"), "{message}");
-    assert!(!out.exists(), "the triangle was learned before the check");
+    assert!(!f.out.exists(), "the triangle was learned before the check");
 }
 
 #[test]
