@@ -1,8 +1,8 @@
 //! The rules of the crate layout (ARCHITECTURE.md, "Crates and what each may depend on"),
-//! read from the manifests themselves: the logic lives in libraries, the process crates are
-//! thin binaries that depend on no other process crate, libraries depend on no process or
-//! tool crate, ground truth's readers (the harness) are never a dependency of a
-//! process but the supervisor's, and the launch file's library links no iceoryx2.
+//! read from the manifests themselves: the process crates are binaries over the libraries
+//! that depend on no other process crate, libraries depend on no process or tool crate,
+//! ground truth's readers (the harness) are never a dependency of a process but the
+//! supervisor's, and the launch file's library links no iceoryx2.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
