@@ -8,6 +8,8 @@
 
 mod common;
 
+use std::sync::OnceLock;
+
 use agp_affordance::AffordanceGradient;
 use agp_harness::{place_goals, run_episode, trajectory_error};
 use agp_physics::{Sim, SimConfig};
@@ -18,10 +20,20 @@ use agp_shared_types::Pose2;
 use agp_world::{RobotDescription, Scenario};
 use glam::DVec2;
 
-fn setup(name: &str) -> (Scenario, RobotDescription, AffordanceGradient) {
+/// The built-in `name` (`triangle` or `lshape`), the E-puck and the object's gradient
+/// learned from ground truth, learned once per test run and shared by the tests (the
+/// learning is deterministic: each test would learn the same gradient).
+fn setup(name: &str) -> (Scenario, RobotDescription, &'static AffordanceGradient) {
+    static TRIANGLE: OnceLock<AffordanceGradient> = OnceLock::new();
+    static LSHAPE: OnceLock<AffordanceGradient> = OnceLock::new();
     let scenario = Scenario::builtin(name).expect("built-in");
     let robot = RobotDescription::epuck();
-    let ag = common::learn_from_truth(&scenario, &robot);
+    let learned = match name {
+        "triangle" => &TRIANGLE,
+        "lshape" => &LSHAPE,
+        other => panic!("no gradient kept for `{other}`"),
+    };
+    let ag = learned.get_or_init(|| common::learn_from_truth(&scenario, &robot));
     (scenario, robot, ag)
 }
 
@@ -67,28 +79,32 @@ fn placed(
         .count()
 }
 
+/// Runs `planner` on `count` goals of built-in `name` (drawn with `goal_seed`) and fails
+/// unless it places the object at every one. The episodes are deterministic for their seeds
+/// (in-process physics, seeded noise), so there is no margin: the README reports that the
+/// affordance planner places both objects at every goal (100 % on the held-out seeds), and
+/// one goal missed here is a change of what we claim.
+#[track_caller]
+fn assert_places_every_goal(name: &str, planner: PlannerKind, count: usize, goal_seed: u64) {
+    let (scenario, robot, ag) = setup(name);
+    let goals = place_goals(&scenario, count, goal_seed);
+    let n = placed(&scenario, &robot, ag, planner, &goals);
+    assert_eq!(n, goals.len(), "{planner} placed {n} of {}", goals.len());
+}
+
 #[test]
 fn the_oracle_places_the_triangle_at_every_goal() {
-    let (scenario, robot, ag) = setup("triangle");
-    let goals = place_goals(&scenario, 4, 11);
-    let n = placed(&scenario, &robot, &ag, PlannerKind::Oracle, &goals);
-    assert_eq!(n, goals.len(), "the oracle placed {n} of {}", goals.len());
+    assert_places_every_goal("triangle", PlannerKind::Oracle, 4, 11);
 }
 
 #[test]
-fn with_ir_only_estimates_the_affordance_planner_places_the_triangle_in_five_of_six_episodes() {
-    let (scenario, robot, ag) = setup("triangle");
-    let goals = place_goals(&scenario, 6, 5);
-    let n = placed(&scenario, &robot, &ag, PlannerKind::Affordance, &goals);
-    assert!(n >= 5, "placed {n} of {}", goals.len());
+fn with_ir_only_estimates_the_affordance_planner_places_the_triangle_at_every_goal() {
+    assert_places_every_goal("triangle", PlannerKind::Affordance, 6, 5);
 }
 
 #[test]
-fn with_ir_only_estimates_the_affordance_planner_places_the_l_in_three_of_four_episodes() {
-    let (scenario, robot, ag) = setup("lshape");
-    let goals = place_goals(&scenario, 4, 5);
-    let n = placed(&scenario, &robot, &ag, PlannerKind::Affordance, &goals);
-    assert!(n >= 3, "placed {n} of {}", goals.len());
+fn with_ir_only_estimates_the_affordance_planner_places_the_l_at_every_goal() {
+    assert_places_every_goal("lshape", PlannerKind::Affordance, 4, 5);
 }
 
 #[test]
@@ -137,25 +153,29 @@ fn the_affordance_and_oracle_planners_refuse_to_run_without_a_gradient() {
     }
 }
 
-#[test]
-fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does() {
-    let (scenario, robot, ag) = setup("lshape");
-    let path = scenario.task.path.clone();
+/// The affordance planner and the baseline along `path` from the L's start: each one's
+/// mean distance of the centroid to the path per recorded point (m), in that order. Fails
+/// unless both reached the path's end.
+fn trajectory_errors(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    ag: &AffordanceGradient,
+    path: &[DVec2],
+) -> [f64; 2] {
     let config = EpisodeConfig::for_task(&scenario.task);
     let task = Task::Trajectory {
-        path: path.clone(),
+        path: path.to_vec(),
         keep_heading_rad: None,
     };
-    let mut errors = Vec::new();
-    for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
-        let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
+    [PlannerKind::Affordance, PlannerKind::Baseline].map(|planner| {
+        let r = run_episode(scenario, robot, Some(ag), planner, &task, &config)
             .expect("the episode runs");
         let judged = r
             .evaluation
             .clone()
             .expect("in-process episodes are judged");
         let poses: Vec<Pose2> = judged.samples.iter().map(|s| s.pose).collect();
-        let e = trajectory_error(&path, &poses).expect("recorded poses");
+        let e = trajectory_error(path, &poses).expect("recorded poses");
         println!(
             "{planner}: mean error {:.2} mm over {} points, {} pushes, end {:.1} mm off",
             e * 1e3,
@@ -168,53 +188,55 @@ fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does
             "{planner} did not reach the end: {:?}",
             r.end
         );
-        // The object is recorded while it is pushed, about every 50 ms: a 600 mm line at
-        // about 45 mm per push is over 50 points.
+        // The object is recorded while it is pushed, about every 50 ms: a 550-600 mm path
+        // at about 45 mm per push is over 50 points.
         assert!(poses.len() > 50, "{planner}: {} points", poses.len());
-        assert!(e < 0.005, "{planner}: mean error {:.1} mm", e * 1e3);
-        errors.push(e);
-    }
+        e
+    })
+}
+
+/// The project's trajectory target: the affordance planner's mean error at most 0.6 of the
+/// baseline's on every path (README, The paper's tasks).
+const TARGET_TRAJECTORY_RATIO: f64 = 0.6;
+
+#[track_caller]
+fn assert_ratio_within_target(affordance: f64, baseline: f64) {
     assert!(
-        errors[0] < errors[1],
-        "affordance {:.2} mm, baseline {:.2} mm per point",
-        errors[0] * 1e3,
-        errors[1] * 1e3
+        affordance < TARGET_TRAJECTORY_RATIO * baseline,
+        "affordance {:.2} mm, baseline {:.2} mm per point: ratio {:.2}",
+        affordance * 1e3,
+        baseline * 1e3,
+        affordance / baseline
     );
+}
+
+#[test]
+fn along_the_default_line_the_gradient_keeps_the_l_nearer_than_the_baseline_does() {
+    let (scenario, robot, ag) = setup("lshape");
+    let path = scenario.task.path.clone();
+    let [affordance, baseline] = trajectory_errors(&scenario, &robot, ag, &path);
+    for (planner, e) in [("affordance", affordance), ("baseline", baseline)] {
+        assert!(e < 0.005, "{planner}: mean error {:.1} mm", e * 1e3);
+    }
+    // The project's target is a ratio of at most 0.6 on every path (README, The paper's
+    // tasks); this deterministic episode measured 0.47 (2.03 / 4.32 mm) when the assertion
+    // was set, so 0.6 leaves 0.13 for a change of the planner that moves this one episode.
+    // (The README's 0.42 is a mean over seeds 200-219: one seed cannot hold a mean.)
+    assert_ratio_within_target(affordance, baseline);
 }
 
 #[test]
 fn around_a_90_degree_bend_the_gradients_pushes_keep_the_l_nearer_than_the_baselines() {
     let (scenario, robot, ag) = setup("lshape");
     let path = agp_harness::task_goals::NamedPath::Bend90.points(&scenario);
-    let config = EpisodeConfig::for_task(&scenario.task);
-    let task = Task::Trajectory {
-        path: path.clone(),
-        keep_heading_rad: None,
-    };
-    let mut errors = Vec::new();
-    for planner in [PlannerKind::Affordance, PlannerKind::Baseline] {
-        let r = run_episode(&scenario, &robot, Some(&ag), planner, &task, &config)
-            .expect("the episode runs");
-        let judged = r
-            .evaluation
-            .clone()
-            .expect("in-process episodes are judged");
-        assert!(
-            judged.success,
-            "{planner} did not reach the end: {:?}",
-            r.end
-        );
-        let poses: Vec<Pose2> = judged.samples.iter().map(|s| s.pose).collect();
-        errors.push(trajectory_error(&path, &poses).expect("recorded poses"));
-    }
-    // On the tuning seeds the gradient's pushes kept within 0.4 of the baseline's error
-    // round this bend; a margin of 0.8 leaves room for one seed's noise.
-    assert!(
-        errors[0] < 0.8 * errors[1],
-        "affordance {:.2} mm, baseline {:.2} mm per point",
-        errors[0] * 1e3,
-        errors[1] * 1e3
-    );
+    let [affordance, baseline] = trajectory_errors(&scenario, &robot, ag, &path);
+    // The README reports 0.44 for this bend, the ratio of the mean errors over seeds
+    // 200-219, within the project's target of 0.6 per path. This deterministic episode
+    // measured 0.58 (2.25 / 3.86 mm) when the assertion was set: it is held to the target,
+    // with 0.02 to spare; single seeds of that sweep spread from 0.2 to 1.7 on the bends,
+    // so a change of the planner can move this one episode past it (then run
+    // `agp bench trajectory --seeds 20 --first-seed 200` before moving the bound).
+    assert_ratio_within_target(affordance, baseline);
 }
 
 #[test]
