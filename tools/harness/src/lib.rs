@@ -1,6 +1,7 @@
 //! The harness: everything that runs the system to measure or judge it, and never runs
-//! inside the pipeline. The benchmarks of `agp bench` (`bench_learn`, `bench_tasks`,
-//! `bench_paper`, and `bench_merge`, which merges the parts of a run split into shards;
+//! inside the pipeline. The benchmarks of `agp bench` (`bench_learn` with `learn_curve`,
+//! `bench_tasks`, `bench_trajectory`, `bench_adapt`, `bench_online`, `bench_paper`, their
+//! seeds in `seeds`, and `bench_merge`, which merges the parts of a run split into shards;
 //! over private pipelines of real processes by `pipeline_bench` or in
 //! process by `in_process`), the judge that scores a task by ground truth (`evaluation`),
 //! `agp probe` (`probe`), the learning benchmark against the physics library
@@ -10,7 +11,8 @@
 //! `side_by_side`, which spreads independent benchmark work over the cores, and `stop`, how a
 //! bench stops on a signal (partial JSON, no file left) and sweeps what dead benches left.
 //!
-//! Ground truth is read here and in the physics library only (and by the `oracle`).
+//! Ground truth is read here and in the physics library only (and by the `oracle` and
+//! `model` planners, which say so).
 
 pub mod bench_adapt;
 pub mod bench_learn;
