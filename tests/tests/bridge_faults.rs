@@ -10,15 +10,23 @@
 //! - B's planner failing before it published a task: B's bridge says `bye`, and A's run ends
 //!   1 saying nothing was judged (it once waited for ever when B stopped before its bridge
 //!   had answered A's hello).
+//!
+//! And one live session on the realtime clock, B's planner pursuing a goal A's supervisor
+//! owns: the link cut for several watchdog periods stops the robot by physics's watchdog,
+//! physics's own account shows that no command drove it and that it did not move while the
+//! link was down, and the session goes on once the link is back. Its checks are physics's
+//! account of the cut, not how long anything took.
 
 use std::net::SocketAddr;
 use std::path::Path;
 use std::time::Duration;
 
 use agp_harness::link_proxy::LinkProxy;
+use agp_harness::watchdog_stops::{LoggedStop, stop_of_fault};
+use agp_shared_types::monotonic_ns;
 use agp_tests::{
     AgpUp, LaunchDir, StepLog, assert_every_step_applied_once, assert_placed, count_instance_files,
-    learned_ag, run_agp,
+    learned_ag, run_agp, status_json,
 };
 
 /// Safety net of the short waits; the checks never depend on it.
@@ -196,6 +204,101 @@ fn a_robot_side_whose_far_planner_failed_before_a_task_exits_1_saying_nothing_wa
     assert!(
         end_a.stderr.contains("nothing was judged"),
         "A says why it failed: {all}"
+    );
+    assert_eq!(count_instance_files(&a), 0, "files of `{a}` remain");
+    assert_eq!(count_instance_files(&b), 0, "files of `{b}` remain");
+}
+
+/// A launch file of this module's as a live session on the realtime clock: no step log
+/// (lockstep's), no end of the run but `agp down`, B's planner serving the goals that A's
+/// supervisor owns.
+fn live_session(launch: String) -> String {
+    launch
+        .replace("mode = \"lockstep\"", "mode = \"realtime\"")
+        .replace("args = [\"--step-log\", \"steps.log\"]\n", "")
+        .replace("\nends_run = true\n", "\n")
+        .replace("\"--mode\", \"place\"", "\"--mode\", \"serve\"")
+}
+
+/// The cut of the live session: several of physics's watchdog periods (250 ms), so the
+/// watchdog must stop the robot during it.
+const LIVE_CUT: Duration = Duration::from_millis(1_500);
+
+/// Commands already on their way when the link was cut (in a socket, in Zenoh's queues) may
+/// still reach physics this long after the cut; none may after.
+const IN_FLIGHT_NS: u64 = 500_000_000;
+
+/// The most a robot stopped by the watchdog may move from one watchdog period after the
+/// stop on (it does not move at all: anything is a command that drove it), mm and deg.
+const STILL: f64 = 0.1;
+
+#[test]
+fn a_live_session_across_a_cut_link_stops_the_robot_by_the_watchdog_moves_it_not_and_goes_on() {
+    let ag = learned_ag("triangle");
+    let (a, b) = (instance("rtcutrob"), instance("rtcutpla"));
+    let port = free_port();
+    let proxy = LinkProxy::start(SocketAddr::from(([127, 0, 0, 1], port))).expect("the proxy");
+    let robot = LaunchDir::new(&live_session(robot_launch(&a, Some(&ag), port, 30.0)));
+    let planner = LaunchDir::new(&live_session(planner_launch(&b, proxy.port())));
+    let mut up_a = AgpUp::start(&robot.launch(), &[]);
+    let mut up_b = AgpUp::start(&planner.launch(), &[]);
+    up_b.wait_for_lines("serving the goals", 1, PLACE_TIMEOUT);
+    run_agp(
+        robot.path(),
+        &["goal", "--instance", &a, "--place", "0", "0", "0"],
+        TIMEOUT,
+    )
+    .assert_success("a goal queued on the robot side");
+    // B's planner took the goal across the link: its commands drive the robot.
+    up_b.until("the goal taken across the link", PLACE_TIMEOUT, || {
+        status_json(robot.path(), &a, TIMEOUT)["goals"][0]["state"] != "queued"
+    });
+    let cut_ns = monotonic_ns();
+    proxy.cut();
+    std::thread::sleep(LIVE_CUT);
+    proxy.restore();
+    let restored_ns = monotonic_ns();
+    // Physics says a stop when a command ends it: the stop that spans the cut ends once
+    // the link is back and B's commands come again.
+    let mut seen = 1;
+    let stop = loop {
+        let lines = up_a.wait_for_lines("watchdog stop:", seen, PLACE_TIMEOUT);
+        let stops: Vec<LoggedStop> = lines.iter().filter_map(|l| LoggedStop::parse(l)).collect();
+        if let Some(stop) = stop_of_fault(&stops, cut_ns + IN_FLIGHT_NS, restored_ns) {
+            break stop;
+        }
+        seen = lines.len() + 1;
+    };
+    let goal = status_json(robot.path(), &a, TIMEOUT)["goals"][0].clone();
+    for (dir, name) in [(planner.path(), &b), (robot.path(), &a)] {
+        run_agp(dir, &["down", "--instance", name], TIMEOUT).assert_success("`agp down`");
+    }
+    let end_b = up_b.wait(TIMEOUT);
+    let end_a = up_a.wait(TIMEOUT);
+    let all = format!("{}\nstop: {stop:?}", both(&end_a, &end_b));
+    println!("{all}");
+    // Physics's own account: no command drove the robot from the cut (but what was on its
+    // way) until the link was back; the watchdog stopped the wheels; from one watchdog
+    // period after that on, the robot did not move.
+    assert!(stop.last_command_ns <= cut_ns + IN_FLIGHT_NS, "{all}");
+    let resumed = stop.resumed_ns.expect("a command ended the stop");
+    assert!(
+        resumed >= restored_ns,
+        "a command before the link was back: {all}"
+    );
+    assert!(stop.accounted, "{all}");
+    assert!(stop.motion_mm <= STILL && stop.turn_deg <= STILL, "{all}");
+    // The session went on: B's commands came again, and the goal was still pursued (or
+    // done: reached, or ended by the planner with its reason) when it was brought down.
+    assert!(
+        goal["state"] == "pursued" || goal["end"].as_str().is_some_and(|e| !e.is_empty()),
+        "{goal}"
+    );
+    assert_eq!(end_b.status.code(), Some(0), "{all}");
+    assert_eq!(end_a.status.code(), Some(0), "{all}");
+    assert!(
+        end_a.stdout.contains("watchdog (250 ms): "),
+        "physics's summary: {all}"
     );
     assert_eq!(count_instance_files(&a), 0, "files of `{a}` remain");
     assert_eq!(count_instance_files(&b), 0, "files of `{b}` remain");

@@ -24,6 +24,9 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{CallbackProgression, Node, NodeState, PortFactory};
 
+mod watchdog;
+use watchdog::WatchdogAccount;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Clock {
     /// Advance one step only when the command for that step has arrived (reproducible).
@@ -764,10 +767,12 @@ impl Runner {
         let mut last_command = Instant::now() - watchdog;
         let mut next = Instant::now();
         let mut ticks = TickAccount::default();
+        let mut dog = WatchdogAccount::new(watchdog);
         self.publish(0, TimingHeader::default())?;
         while !shutdown_requested() {
             if self.apply_resets()? {
                 wheels = (0.0, 0.0);
+                dog.reset();
             }
             let epoch_before = self.active_epoch;
             self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
@@ -796,6 +801,11 @@ impl Runner {
                     answered = Some(c.step);
                 }
             }
+            if answered.is_some()
+                && let Some(stop) = dog.command(monotonic_ns())
+            {
+                println!("agp-physics: {stop}");
+            }
             self.gate.name_strangers(&self.ports);
             if self.active_epoch != epoch_before {
                 ticks.flip();
@@ -808,10 +818,14 @@ impl Runner {
             }
             if last_command.elapsed() > watchdog {
                 // Stale commands: stop, as the robot's firmware would.
+                if let Some(stop) = dog.fire(monotonic_ns(), wheels) {
+                    println!("agp-physics: {}", stop.fired_line());
+                }
                 wheels = (0.0, 0.0);
             }
             self.sim.step(wheels.0, wheels.1);
             let applied = monotonic_ns();
+            dog.stepped(applied, self.sim.robot_pose());
             if cause.trace_id != 0 {
                 cause.stamps_ns[stage::COMMAND_APPLIED] = applied;
             }
@@ -827,7 +841,10 @@ impl Runner {
                 next = now;
             }
         }
-        println!("agp-physics: {ticks}");
+        if let Some(stop) = dog.current() {
+            println!("agp-physics: {stop}");
+        }
+        println!("agp-physics: {ticks}; {dog}");
         Ok(())
     }
 }

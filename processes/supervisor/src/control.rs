@@ -292,7 +292,8 @@ fn clean_dead(instance: &Instance) -> Result<DownOutcome> {
 }
 
 /// `agp down --stale`: removes the instances of benchmarks that died without cleaning
-/// (`bench-<pid>-*` of this user, pid gone) and says how many.
+/// (`bench-<pid>-*` of this user, pid gone: `agp bench`'s pipelines and `bench-faults`'
+/// runs) and says how many.
 pub fn down_stale() -> Result<u8> {
     let swept = agp_harness::stop::sweep_stale()?;
     match swept.line() {

@@ -15,7 +15,7 @@ pub struct DownArgs {
     timeout_s: u64,
     /// Instead, remove the leftovers of benchmarks that died without cleaning (`kill -9`):
     /// every instance `bench-<pid>-*` of this user whose pid no process runs any more (what
-    /// every `agp bench` does when it starts).
+    /// every `agp bench` does when it starts), the fault campaign's (`bench-faults`) too.
     #[arg(long, conflicts_with = "instance")]
     stale: bool,
 }

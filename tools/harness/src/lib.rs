@@ -7,7 +7,8 @@
 //! `agp probe` (`probe`), the learning benchmark against the physics library
 //! (`learn_bench`), the goals and paths of the task benchmarks (`task_goals`), and the
 //! pieces of the benchmark binaries in `src/bin` (`hop`, `math`, `pipeline`, and `link_proxy`,
-//! which cuts a bridge's link and restores it), and
+//! which cuts a bridge's link and restores it, and `watchdog_stops`, physics's watchdog stops
+//! as its log says them), and
 //! `side_by_side`, which spreads independent benchmark work over the cores, and `stop`, how a
 //! bench stops on a signal (partial JSON, no file left) and sweeps what dead benches left.
 //!
@@ -36,6 +37,7 @@ pub mod side_by_side;
 pub mod stop;
 pub mod task_goals;
 mod task_plot;
+pub mod watchdog_stops;
 
 pub use in_process::{InProcessEpisodeError, InProcessWorld, run_episode, run_online_episode};
 pub use task_goals::{PlannerSummary, median, place_goals, trajectory_error};

@@ -39,7 +39,9 @@ use agp_harness::pipeline::{
     Bins, LaunchSpec, Phase, Session, Status, StepCounter, instance_files, is_interrupt,
     last_line_with, reap_children, signal, sleep_checked, step_log_path,
 };
+use agp_harness::watchdog_stops::{LoggedStop, WatchdogLog, stop_of_fault};
 use agp_runtime::install_shutdown_handler;
+use agp_shared_types::monotonic_ns;
 use agp_world::Rng;
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;
@@ -91,7 +93,14 @@ struct Args {
     /// supervisor, and the link cut then restored. 0 skips the phase.
     #[arg(long, default_value_t = 200)]
     bridge_faults: u32,
-    /// Run the bridge phase only.
+    /// The live bridge phase, after the bridge phase: this many faults across the link (the
+    /// same five kinds) into live sessions on the realtime clock split over two instances,
+    /// the far planner (`--mode serve`) pursuing a goal queued on the robot's side. Physics's
+    /// own account must show the robot stopped by its watchdog and never moved beyond one
+    /// watchdog period while the link was down. 0 skips the phase.
+    #[arg(long, default_value_t = 200)]
+    bridge_live_faults: u32,
+    /// Run the two bridge phases only (either skipped by its count of 0).
     #[arg(long, conflicts_with = "bench_signals_only")]
     bridge_only: bool,
     /// The phases of one instance to cycle through, comma-separated: learn, place, live.
@@ -118,6 +127,17 @@ fn parse_phases(s: &str) -> Result<PhaseList, String> {
         return Err("name at least one phase: learn, place, live".to_owned());
     }
     Ok(PhaseList(v))
+}
+
+/// The instance of one run of the campaign: `bench-<pid>-<tag>`, as every benchmark names
+/// its pipelines, so that what a campaign killed with -9 left (a supervisor it had stopped
+/// with SIGSTOP cannot clean when it dies) is removed by the next `agp bench` or by
+/// `agp down --stale` once no process runs as its pid. `tag`: the phase's letter (`f` one
+/// instance, `l` a placement across the bridge, `v` a live session across it), the run's
+/// index, and `r`/`p` for a bridge run's two sides: at most 20 characters with a pid of 7
+/// digits.
+fn run_instance(tag: &str) -> String {
+    format!("bench-{}-{tag}", std::process::id())
 }
 
 /// The most restarts a launch file may give a child (`agp`'s own limit is 1000).
@@ -416,7 +436,7 @@ impl Campaign {
 
     /// One run of `phase` with at most `budget` faults.
     fn run(&mut self, index: usize, phase: Phase, budget: u32) -> Result<()> {
-        let instance = format!("bf{}-{index:04}", std::process::id() % 100_000);
+        let instance = run_instance(&format!("f{index:04}"));
         if !instance_files(&instance)?.is_empty() {
             bail!("instance `{instance}` already has files; remove them or run again");
         }
@@ -702,7 +722,12 @@ fn write_launch(spec: &LaunchSpec<'_>, bins: &Bins, dir: &Path, ag: &Path) -> Re
 
 /// `agp goal --instance NAME --place LIVE_GOAL` on a live session.
 fn queue_goal(run: &Run<'_>) -> Result<()> {
-    let s = &run.session;
+    queue_goal_on(&run.session)
+}
+
+/// `agp goal --instance NAME --place LIVE_GOAL` on the live session `s` (across a bridge:
+/// the robot's side, whose supervisor owns and judges the goals).
+fn queue_goal_on(s: &Session<'_>) -> Result<()> {
     let out = s
         .bins
         .agp(&s.dir)
@@ -729,24 +754,28 @@ fn await_goal(run: &mut Run<'_>, timeout: Duration) -> Result<Option<Value>> {
         if run.ended().is_some() {
             return Ok(None);
         }
-        let s = &run.session;
-        let out = s
-            .bins
-            .agp(&s.dir)
-            .args(["status", "--instance", &s.instance, "--json"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .output()
-            .context("cannot run `agp status`")?;
-        let goal = serde_json::from_slice::<Value>(&out.stdout)
-            .ok()
-            .map(|v| v["goals"][0].clone());
-        if let Some(g) = goal.filter(|g| g["state"] == "done") {
+        if let Some(g) = goal_of(&run.session)?.filter(|g| g["state"] == "done") {
             return Ok(Some(g));
         }
         sleep_checked(Duration::from_millis(500))?;
     }
     Ok(None)
+}
+
+/// The first goal of the live session `s` as `agp status --json` shows it, if it shows one.
+fn goal_of(s: &Session<'_>) -> Result<Option<Value>> {
+    let out = s
+        .bins
+        .agp(&s.dir)
+        .args(["status", "--instance", &s.instance, "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .output()
+        .context("cannot run `agp status`")?;
+    Ok(serde_json::from_slice::<Value>(&out.stdout)
+        .ok()
+        .map(|v| v["goals"][0].clone())
+        .filter(|g| !g.is_null()))
 }
 
 /// The live session's verdict: its goal reached, or ended by the planner with its reason
@@ -945,6 +974,12 @@ struct LinkFaultRecord {
     /// Steps physics applied while the link was cut, from 100 ms after the cut (what was
     /// already on its way) to the restore: nothing may drive the robot meanwhile.
     steps_while_cut: Option<u64>,
+    /// Live: the watchdog stop physics logged for this fault (the link down), if one came.
+    stop: Option<LoggedStop>,
+    /// Live: what physics's account shows went wrong while the link was down (a command
+    /// applied, the wheels stopped later than the watchdog, the robot moved beyond one
+    /// watchdog period after it).
+    violation: Option<String>,
     note: String,
 }
 
@@ -967,6 +1002,15 @@ struct LinkRunRecord {
     exits: (Option<i32>, Option<i32>),
     files_left: usize,
     wall_s: f64,
+    /// Live: how the goal ended (`done`, `lost`, ...), `None` when it was not done by the
+    /// run's end.
+    goal_end: Option<String>,
+    /// Live: physics's watchdog stops over the whole run, and the largest motion (mm, deg)
+    /// of the robot beyond one watchdog period after any of them.
+    watchdog_stops: usize,
+    motion: (f64, f64),
+    /// Live: physics's summary line at its end.
+    physics_summary: Option<String>,
     note: String,
 }
 
@@ -987,7 +1031,9 @@ struct LinkRun<'a> {
 /// recovery, so a fault the link rides out never ends the run.
 const LINK_FAR_TIMEOUT_S: u32 = 60;
 
-/// The two launch files of a bridge run in `dir` (`robot/`, `planner/`).
+/// The two launch files of a bridge run in `dir` (`robot/`, `planner/`): a placement in
+/// lockstep, or (`live`) a live session on the realtime clock, the far planner serving the
+/// goals of the robot side's supervisor until `agp down`.
 fn link_launches(
     bins: &Bins,
     dir: &Path,
@@ -995,22 +1041,34 @@ fn link_launches(
     ports: (u16, u16),
     ag: &Path,
     max_restarts: u32,
+    live: bool,
 ) -> Result<(PathBuf, PathBuf)> {
     let exec = |name: &str| format!("\"{}\"", bins.path(name).display());
     let restart = format!(
         "restart = {{ policy = \"on-failure\", max_restarts = {max_restarts}, backoff_ms = 10 }}\nstop_grace_ms = 3000\n"
     );
+    let clock = if live { "realtime" } else { "lockstep" };
     let head = |name: &str| {
         format!(
-            "instance = \"{name}\"\nscenario = \"triangle\"\nresults = \"results\"\n\n[clock]\nmode = \"lockstep\"\nrate_hz = 640\n\n"
+            "instance = \"{name}\"\nscenario = \"triangle\"\nresults = \"results\"\n\n[clock]\nmode = \"{clock}\"\nrate_hz = 640\n\n"
         )
     };
+    // A placement ends both runs (the planner's end, across the link); a live session
+    // lasts until `agp down`.
+    let ends_run = if live { "" } else { "ends_run = true\n" };
     let robot_dir = dir.join("robot");
+    let physics_args = if live {
+        String::new()
+    } else {
+        format!(
+            "args = [\"--step-log\", \"{}\"]\n",
+            step_log_path(&robot_dir).display()
+        )
+    };
     let robot = head(names.0)
         + &format!(
-            "[[process]]\nname = \"physics\"\nexec = {}\nargs = [\"--step-log\", \"{}\"]\n{restart}\n",
+            "[[process]]\nname = \"physics\"\nexec = {}\n{physics_args}{restart}\n",
             exec("agp-physics"),
-            step_log_path(&robot_dir).display()
         )
         + &format!(
             "[[process]]\nname = \"estimator\"\nexec = {}\nargs = [\"--load\", \"{}\"]\n{restart}\n",
@@ -1018,16 +1076,17 @@ fn link_launches(
             ag.display()
         )
         + &format!(
-            "[[process]]\nname = \"planner\"\nremote = {{ role = \"planner\", listen = \"tcp/127.0.0.1:{}\", insecure = true }}\nenv = {{ AGP_BRIDGE_FAR_TIMEOUT_S = \"{LINK_FAR_TIMEOUT_S}\" }}\nends_run = true\n",
+            "[[process]]\nname = \"planner\"\nremote = {{ role = \"planner\", listen = \"tcp/127.0.0.1:{}\", insecure = true }}\nenv = {{ AGP_BRIDGE_FAR_TIMEOUT_S = \"{LINK_FAR_TIMEOUT_S}\" }}\n{ends_run}",
             ports.0
         );
+    let mode = if live { "serve" } else { "place" };
     let planner = head(names.1)
         + &format!(
             "[[process]]\nname = \"robot\"\nremote = {{ role = \"robot\", connect = \"tcp/127.0.0.1:{}\", insecure = true }}\n{restart}\n",
             ports.1
         )
         + &format!(
-            "[[process]]\nname = \"planner\"\nexec = {}\nargs = [\"--mode\", \"place\", \"--planner\", \"affordance\"]\n{restart}ends_run = true\n",
+            "[[process]]\nname = \"planner\"\nexec = {}\nargs = [\"--mode\", \"{mode}\", \"--planner\", \"affordance\"]\n{restart}{ends_run}",
             exec("agp-planner")
         );
     let mut paths = Vec::new();
@@ -1126,9 +1185,11 @@ struct LinkCampaign<'a> {
     faults: Vec<LinkFaultRecord>,
     runs: Vec<LinkRunRecord>,
     started: Instant,
+    /// The live bridge phase: live sessions on the realtime clock, not placements.
+    live: bool,
 }
 
-impl LinkCampaign<'_> {
+impl<'a> LinkCampaign<'a> {
     fn draw(&mut self) -> LinkFault {
         if self.next >= self.deck.len() {
             for i in (1..self.deck.len()).rev() {
@@ -1141,16 +1202,23 @@ impl LinkCampaign<'_> {
         self.deck[self.next - 1]
     }
 
-    /// One placement across the link with at most `budget` faults.
-    fn run(&mut self, index: usize, budget: u32) -> Result<()> {
-        let tag = format!("bf{}-{index:04}", std::process::id() % 100_000);
-        let names = (format!("{tag}r"), format!("{tag}p"));
+    /// Starts run `index`'s two sides (a placement, or a live session when `self.live`):
+    /// their instance names, the run's folder and the run.
+    fn start_run(&mut self, index: usize) -> Result<((String, String), PathBuf, LinkRun<'a>)> {
+        let tag = format!("{}{index:04}", if self.live { 'v' } else { 'l' });
+        let names = (
+            run_instance(&format!("{tag}r")),
+            run_instance(&format!("{tag}p")),
+        );
         for n in [&names.0, &names.1] {
             if !instance_files(n)?.is_empty() {
                 bail!("instance `{n}` already has files; remove them or run again");
             }
         }
-        let dir = self.work.join(format!("link-{index:04}"));
+        let dir = self.work.join(format!(
+            "{}-{index:04}",
+            if self.live { "live-link" } else { "link" }
+        ));
         let port = std::net::TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
             .context("a free port on the loopback")?
@@ -1165,10 +1233,11 @@ impl LinkCampaign<'_> {
             (port, proxy.port()),
             self.ag_file,
             max_restarts,
+            self.live,
         )?;
         let robot = Session::start(self.bins, &names.0, robot_launch)?;
         let planner = Session::start(self.bins, &names.1, planner_launch)?;
-        let mut run = LinkRun {
+        let run = LinkRun {
             steps: StepCounter::new(step_log_path(&dir.join("robot"))),
             robot,
             planner,
@@ -1176,6 +1245,15 @@ impl LinkCampaign<'_> {
             started: Instant::now(),
             planner_ups: 1,
         };
+        Ok((names, dir, run))
+    }
+
+    /// One placement across the link with at most `budget` faults.
+    fn run(&mut self, index: usize, budget: u32) -> Result<()> {
+        let (names, dir, mut run) = self.start_run(index)?;
+        if self.live {
+            return self.run_live(index, budget, names, &dir, run);
+        }
         eprintln!(
             "[{}/{}] {:.0} s, bridge run {index}: starting",
             self.faults.len(),
@@ -1243,6 +1321,10 @@ impl LinkCampaign<'_> {
             exits,
             files_left,
             wall_s: run.started.elapsed().as_secs_f64(),
+            goal_end: None,
+            watchdog_stops: 0,
+            motion: (0.0, 0.0),
+            physics_summary: None,
             note,
         });
         Ok(())
@@ -1273,6 +1355,8 @@ impl LinkCampaign<'_> {
             survived: false,
             recovery_ms: None,
             steps_while_cut: None,
+            stop: None,
+            violation: None,
             note: String::new(),
         };
         let all = |s: &Status| s.all_running(&["robot", "planner"]);
@@ -1362,6 +1446,9 @@ impl LinkCampaign<'_> {
                     "steps_once": r.steps_once, "steps": r.steps,
                     "exit_robot": r.exits.0, "exit_planner": r.exits.1,
                     "files_left": r.files_left, "wall_s": r.wall_s, "note": r.note,
+                    "goal_end": r.goal_end, "watchdog_stops": r.watchdog_stops,
+                    "motion_mm": r.motion.0, "turn_deg": r.motion.1,
+                    "physics_summary": r.physics_summary,
                 })
             })
             .collect();
@@ -1373,12 +1460,26 @@ impl LinkCampaign<'_> {
                     "run": f.run, "fault": f.kind.label(), "at_s": f.at_s, "pause_ms": f.pause_ms,
                     "survived": f.survived, "recovery_ms": f.recovery_ms,
                     "steps_while_cut": f.steps_while_cut, "note": f.note,
+                    "violation": f.violation,
+                    "stop": f.stop.map(|s| json!({
+                        "last_command_ns": s.last_command_ns, "fired_ns": s.fired_ns,
+                        "resumed_ns": s.resumed_ns, "stopped_after_ms": s.stopped_after_ms(),
+                        "wheels_mm_s": [s.wheels_mm_s.0, s.wheels_mm_s.1],
+                        "accounted": s.accounted, "motion_mm": s.motion_mm, "turn_deg": s.turn_deg,
+                    })),
                 })
             })
             .collect();
         json!({
+            "live": self.live,
             "faults_injected": self.faults.len(),
             "faults_survived": self.faults.iter().filter(|f| f.survived).count(),
+            "violations": self.faults.iter().filter(|f| f.violation.is_some()).count(),
+            "watchdog_stops": self.faults.iter().filter(|f| f.stop.is_some()).count(),
+            "max_motion_mm": self.runs.iter().map(|r| r.motion.0).fold(0.0, f64::max),
+            "max_turn_deg": self.runs.iter().map(|r| r.motion.1).fold(0.0, f64::max),
+            "goals_reached": self.runs.iter().filter(|r| self.live && r.placed).count(),
+            "goals_not_done": self.runs.iter().filter(|r| self.live && r.goal_end.is_none()).count(),
             "runs": self.runs.len(),
             "runs_completed": self.runs.iter().filter(|r| r.completed).count(),
             "runs_placed": self.runs.iter().filter(|r| r.placed).count(),
@@ -1394,12 +1495,28 @@ impl LinkCampaign<'_> {
     fn missed(&self) -> Option<String> {
         let not_survived = self.faults.iter().filter(|f| !f.survived).count();
         let lost = self.runs.iter().filter(|r| !r.completed).count();
+        let files: usize = self.runs.iter().map(|r| r.files_left).sum();
+        if self.live {
+            // A goal ended `lost` by the planner, with its reason, is an outcome; one not
+            // done by the run's end is not.
+            let not_done = self.runs.iter().filter(|r| r.goal_end.is_none()).count();
+            let violations = self.faults.iter().filter(|f| f.violation.is_some()).count();
+            let moved = self
+                .runs
+                .iter()
+                .filter(|r| r.motion.0 > STILL_MM || r.motion.1 > STILL_DEG)
+                .count();
+            return (not_survived + lost + not_done + violations + moved + files > 0).then(|| {
+                format!(
+                    "live bridge phase: {not_survived} fault(s) not survived, {lost} session(s) lost, {not_done} goal(s) not done, {violations} fault(s) with a command, a late stop or motion while the link was down, {moved} session(s) with the robot moving after a watchdog stop, {files} file(s) left"
+                )
+            });
+        }
         let wrong = self
             .runs
             .iter()
             .filter(|r| !r.placed || !r.steps_once)
             .count();
-        let files: usize = self.runs.iter().map(|r| r.files_left).sum();
         (not_survived + lost + wrong + files > 0).then(|| {
             format!(
                 "bridge phase: {not_survived} fault(s) not survived, {lost} run(s) lost, {wrong} not placed or a step lost or applied twice, {files} file(s) left"
@@ -1483,34 +1600,637 @@ impl LinkCampaign<'_> {
     }
 }
 
+/// Physics's watchdog (`agp-physics --watchdog-ms`, 250 by default, which the live bridge
+/// phase's launch files keep).
+const WATCHDOG: Duration = Duration::from_millis(250);
+
+/// Commands already on their way when the link went down (in a socket, in Zenoh's queues,
+/// from a far planner a moment before its parent's death killed it): physics may still
+/// apply them this long after.
+const IN_FLIGHT: Duration = Duration::from_millis(100);
+
+/// How late a tick of physics's realtime clock may come on a loaded machine before a stop
+/// later than the watchdog counts as missed.
+const LATE_TICK: Duration = Duration::from_millis(100);
+
+/// Motion of the robot beyond one watchdog period after a stop that counts as moved (a
+/// stopped E-puck does not move at all: any motion is something driving it).
+const STILL_MM: f64 = 0.1;
+const STILL_DEG: f64 = 0.1;
+
+/// Pauses (stop to continue, cut to restore) of the live bridge phase, s: longer than the
+/// watchdog, so each must stop the robot.
+const LIVE_PAUSE_S: (f64, f64) = (0.5, 2.0);
+
+/// How a live session's link came back after a fault that took it down, by physics's log.
+enum LinkBack {
+    /// The watchdog stopped the wheels; this stop.
+    Stop(LoggedStop),
+    /// No stop: commands came again within the watchdog.
+    WithinWatchdog,
+    /// Not within the recovery timeout (or the robot's side ended): why.
+    Never(String),
+}
+
+/// What physics's own account of `stop` says went wrong while the link was down (from
+/// `down_ns` to `up_ns`, when the tool brought it back): a command applied after the link
+/// went down, commands again before it was back, the wheels stopped later than the
+/// watchdog, the robot moved beyond one watchdog period after the stop.
+fn judge_stop(stop: &LoggedStop, down_ns: u64, up_ns: Option<u64>) -> Option<String> {
+    let ns = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+    let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * 1e-6;
+    let mut wrong = Vec::new();
+    if stop.last_command_ns > down_ns + ns(IN_FLIGHT) {
+        wrong.push(format!(
+            "a command applied {:.0} ms after the link went down",
+            ms(down_ns, stop.last_command_ns)
+        ));
+    }
+    if let (Some(up), Some(resumed)) = (up_ns, stop.resumed_ns)
+        && resumed < up
+    {
+        wrong.push(format!(
+            "commands again {:.0} ms before the link was back",
+            ms(resumed, up)
+        ));
+    }
+    if stop.stopped_after_ms() > (WATCHDOG + LATE_TICK).as_secs_f64() * 1e3 {
+        wrong.push(format!(
+            "the wheels stopped {:.0} ms after the last command (watchdog {} ms)",
+            stop.stopped_after_ms(),
+            WATCHDOG.as_millis()
+        ));
+    }
+    if stop.accounted && (stop.motion_mm > STILL_MM || stop.turn_deg > STILL_DEG) {
+        wrong.push(format!(
+            "the robot moved {:.3} mm, {:.3} deg beyond one watchdog period after the stop",
+            stop.motion_mm, stop.turn_deg
+        ));
+    }
+    (!wrong.is_empty()).then(|| wrong.join(", "))
+}
+
+impl LinkRun<'_> {
+    /// Why a side of the run ended, if one did.
+    fn side_ended(&mut self) -> Option<String> {
+        for (side, s) in [("robot", &mut self.robot), ("planner", &mut self.planner)] {
+            if let Some(code) = s.ended() {
+                return Some(format!(
+                    "the {side} side ended with status {code:?}{}",
+                    last_error(&s.dir)
+                ));
+            }
+        }
+        None
+    }
+
+    /// Live: waits until both sides run every child and physics publishes, queues the goal
+    /// on the robot's side, and waits until the far planner took it (the link is up).
+    fn start_live(&mut self, timeout: Duration) -> Result<std::result::Result<(), String>> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            sleep_checked(Duration::from_millis(50))?;
+            if let Some(why) = self.side_ended() {
+                return Ok(Err(why));
+            }
+            if Instant::now() >= deadline {
+                return Ok(Err(format!("not every child running within {timeout:?}")));
+            }
+            let robot = self.robot.status()?.is_some_and(|s| {
+                s.all_running(&["physics", "estimator", "planner"])
+                    && s.child("physics")
+                        .and_then(|p| p.rate_per_s)
+                        .is_some_and(|r| r > 0.0)
+            });
+            if robot
+                && self
+                    .planner
+                    .status()?
+                    .is_some_and(|s| s.all_running(&["robot", "planner"]))
+            {
+                break;
+            }
+        }
+        if let Err(e) = queue_goal_on(&self.robot) {
+            return Ok(Err(format!("{e:#}")));
+        }
+        loop {
+            sleep_checked(Duration::from_millis(100))?;
+            if let Some(why) = self.side_ended() {
+                return Ok(Err(why));
+            }
+            if Instant::now() >= deadline {
+                return Ok(Err(format!(
+                    "the far planner did not take the goal within {timeout:?}"
+                )));
+            }
+            if goal_of(&self.robot)?.is_some_and(|g| g["state"] != "queued") {
+                return Ok(Ok(()));
+            }
+        }
+    }
+
+    /// Waits until the planner's side shows `back`: the time from `since`, or why not.
+    fn wait_far_back(
+        &mut self,
+        since: Instant,
+        timeout: Duration,
+        back: &dyn Fn(&Status) -> bool,
+    ) -> Result<std::result::Result<Duration, String>> {
+        let deadline = since + timeout;
+        loop {
+            if let Some(code) = self.robot.ended() {
+                return Ok(Err(format!(
+                    "the robot side ended with status {code:?}{}",
+                    last_error(&self.robot.dir)
+                )));
+            }
+            if Instant::now() >= deadline {
+                return Ok(Err(format!("the planner side not back within {timeout:?}")));
+            }
+            if let Some(s) = self.planner.status()?
+                && back(&s)
+            {
+                return Ok(Ok(since.elapsed()));
+            }
+            sleep_checked(Duration::from_millis(10))?;
+        }
+    }
+
+    /// Live: waits until physics's log (`log`) shows how the link came back after it went
+    /// down at `down_ns` (back at `up_ns`, when the tool restored it): the watchdog stop
+    /// that spans it, once a command ended it; or none, when no stop is under way three
+    /// watchdog periods after the far end was back.
+    fn wait_link_back(
+        &mut self,
+        log: &Path,
+        down_ns: u64,
+        up_ns: Option<u64>,
+        timeout: Duration,
+    ) -> Result<LinkBack> {
+        let since = Instant::now();
+        let from_ns = down_ns + u64::try_from(IN_FLIGHT.as_nanos()).unwrap_or(0);
+        loop {
+            let w = WatchdogLog::read(log);
+            if let Some(stop) = stop_of_fault(&w.stops, from_ns, up_ns.unwrap_or(u64::MAX)) {
+                return Ok(LinkBack::Stop(stop));
+            }
+            if !w.stop_under_way() && since.elapsed() >= WATCHDOG * 3 {
+                return Ok(LinkBack::WithinWatchdog);
+            }
+            if let Some(code) = self.robot.ended() {
+                return Ok(LinkBack::Never(format!(
+                    "the robot side ended with status {code:?}{}",
+                    last_error(&self.robot.dir)
+                )));
+            }
+            if since.elapsed() >= timeout {
+                return Ok(LinkBack::Never(format!(
+                    "no command reached physics within {timeout:?} of the far end's return"
+                )));
+            }
+            sleep_checked(Duration::from_millis(20))?;
+        }
+    }
+}
+
+impl<'a> LinkCampaign<'a> {
+    /// One live session across the link on the realtime clock with at most `budget`
+    /// faults: the goal queued on the robot's side, the faults while the far planner
+    /// pursues it, then (once it is done) `agp down` of the planner's side and the robot's.
+    fn run_live(
+        &mut self,
+        index: usize,
+        budget: u32,
+        names: (String, String),
+        dir: &Path,
+        mut run: LinkRun<'a>,
+    ) -> Result<()> {
+        eprintln!(
+            "[{}/{}] {:.0} s, live bridge run {index}: starting",
+            self.faults.len(),
+            self.args.bridge_live_faults,
+            self.started.elapsed().as_secs_f64()
+        );
+        let log = dir.join("robot").join("up.log");
+        let mut lost = run
+            .start_live(Duration::from_secs(120))?
+            .err()
+            .map(|why| format!("never started: {why}"));
+        let (mut faults, mut skips) = (0, 0);
+        while lost.is_none() && faults < budget {
+            sleep_checked(Duration::from_secs_f64(self.rng.range(0.3, 1.5)))?;
+            if goal_of(&run.robot)?.is_some_and(|g| g["state"] == "done") {
+                break;
+            }
+            let kind = self.draw();
+            let Some(record) = self.inject_live(&mut run, index, kind, &log)? else {
+                skips += 1;
+                if skips >= MAX_SKIPS {
+                    lost = Some(format!(
+                        "{skips} faults in a row found no far bridge running"
+                    ));
+                }
+                continue;
+            };
+            (faults, skips) = (faults + 1, 0);
+            if !record.survived {
+                lost = Some(format!("{}: {}", kind.label(), record.note));
+            }
+            self.faults.push(record);
+        }
+        let timeout = Duration::from_secs_f64(self.args.run_timeout_s);
+        let goal = match lost {
+            None => await_goal_on(&mut run, timeout)?,
+            Some(_) => None,
+        };
+        // Brought down as a user would: the planner's side, then the robot's.
+        let downs = (run.planner.down()?, run.robot.down()?);
+        let end = Instant::now() + timeout;
+        while run.ended().is_none() && Instant::now() < end {
+            sleep_checked(Duration::from_millis(20))?;
+        }
+        let exits = (run.robot.ended().flatten(), run.planner.ended().flatten());
+        let completed = exits == (Some(0), Some(0));
+        if lost.is_none() && !completed {
+            lost = Some(format!(
+                "ended with status {exits:?} (`agp down` ok: {downs:?}){}{}",
+                last_error(&dir.join("robot")),
+                last_error(&dir.join("planner"))
+            ));
+        }
+        let mut note = String::new();
+        check_goal(goal.as_ref(), &mut note);
+        let files_left = run.planner.shut() + run.robot.shut();
+        // Physics's whole account of the session, now that it ended.
+        let w = WatchdogLog::read(&log);
+        let motion = w
+            .stops
+            .iter()
+            .filter(|s| s.accounted)
+            .fold((0.0_f64, 0.0_f64), |m, s| {
+                (m.0.max(s.motion_mm), m.1.max(s.turn_deg))
+            });
+        if let Some(why) = lost {
+            note = format!("{why}; {note}");
+        }
+        self.runs.push(LinkRunRecord {
+            index,
+            robot: names.0,
+            planner: names.1,
+            faults,
+            planner_ups: run.planner_ups,
+            completed,
+            placed: goal.as_ref().is_some_and(|g| g["success"] == true),
+            steps_once: true,
+            steps: 0,
+            exits,
+            files_left,
+            wall_s: run.started.elapsed().as_secs_f64(),
+            goal_end: goal
+                .as_ref()
+                .and_then(|g| g["end"].as_str())
+                .filter(|e| !e.is_empty())
+                .map(str::to_owned),
+            watchdog_stops: w.stops.len(),
+            motion,
+            physics_summary: last_line_with(&dir.join("robot"), "up.log", "agp-physics: realtime:"),
+            note,
+        });
+        Ok(())
+    }
+
+    /// Live: injects `kind` into a live session across the link, waits for the far end and
+    /// the link back, and matches the fault with physics's watchdog stop; `None` when the
+    /// far bridge is not running just now.
+    fn inject_live(
+        &mut self,
+        run: &mut LinkRun<'_>,
+        index: usize,
+        kind: LinkFault,
+        log: &Path,
+    ) -> Result<Option<LinkFaultRecord>> {
+        let timeout = Duration::from_secs_f64(self.args.recovery_timeout_s);
+        let Some(before) = run.planner.status()? else {
+            return Ok(None);
+        };
+        let Some(pid) = before
+            .child("robot")
+            .filter(|c| c.running())
+            .and_then(|c| c.pid)
+            .filter(|&p| self.bins.owns(p))
+        else {
+            return Ok(None);
+        };
+        let mut record = LinkFaultRecord {
+            run: index,
+            kind,
+            at_s: run.started.elapsed().as_secs_f64(),
+            pause_ms: None,
+            survived: false,
+            recovery_ms: None,
+            steps_while_cut: None,
+            stop: None,
+            violation: None,
+            note: String::new(),
+        };
+        let all = |s: &Status| s.all_running(&["robot", "planner"]);
+        let pause = Duration::from_secs_f64(self.rng.range(LIVE_PAUSE_S.0, LIVE_PAUSE_S.1));
+        let t0 = Instant::now();
+        let down_ns = monotonic_ns();
+        // When the tool brought the link back (a continue, a restore); a killed far end
+        // comes back by itself.
+        let mut up_ns = None;
+        let back = match kind {
+            LinkFault::KillFarBridge => {
+                signal(pid, libc::SIGKILL);
+                let restarted = move |s: &Status| {
+                    all(s)
+                        && s.child("robot")
+                            .is_some_and(|c| c.running() && c.pid != Some(pid))
+                };
+                run.wait_far_back(t0, timeout, &restarted)?
+            }
+            LinkFault::StopFarBridge | LinkFault::StopFarSupervisor => {
+                let target = if kind == LinkFault::StopFarBridge {
+                    pid
+                } else {
+                    run.planner.sup().pid()
+                };
+                run.planner.stopped = Some(target);
+                signal(target, libc::SIGSTOP);
+                let slept = sleep_checked(pause);
+                signal(target, libc::SIGCONT);
+                run.planner.stopped = None;
+                up_ns = Some(monotonic_ns());
+                slept?;
+                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+                run.wait_far_back(Instant::now(), timeout, &all)?
+            }
+            LinkFault::KillFarSupervisor => {
+                let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
+                run.planner.sup().signal(libc::SIGKILL);
+                run.planner.sup().wait_exit(Duration::from_secs(10));
+                let outlived = reap_children(self.bins, &children, Duration::from_secs(10));
+                if outlived > 0 {
+                    record.note = format!("{outlived} child(ren) outlived the killed supervisor; ");
+                }
+                run.planner.up_again()?;
+                run.planner_ups += 1;
+                run.wait_far_back(t0, timeout, &all)?
+            }
+            LinkFault::Cut => {
+                run.proxy.cut();
+                let slept = sleep_checked(pause);
+                run.proxy.restore();
+                up_ns = Some(monotonic_ns());
+                slept?;
+                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+                Ok(Duration::ZERO)
+            }
+        };
+        let far_back = match back {
+            Ok(d) => d,
+            Err(why) => {
+                record.note += &why;
+                return Ok(Some(record));
+            }
+        };
+        if kind == LinkFault::StopFarSupervisor {
+            // The link stays up: the far bridge and planner run on under a stopped parent.
+            record.survived = true;
+            record.recovery_ms = Some(far_back.as_secs_f64() * 1e3);
+            return Ok(Some(record));
+        }
+        match run.wait_link_back(log, down_ns, up_ns, timeout)? {
+            LinkBack::Stop(stop) => {
+                record.stop = Some(stop);
+                let from = up_ns.unwrap_or(down_ns);
+                match stop.resumed_ns {
+                    Some(r) => record.recovery_ms = Some(r.saturating_sub(from) as f64 * 1e-6),
+                    None => record.note += "physics ended during the stop; ",
+                }
+                record.violation = judge_stop(&stop, down_ns, up_ns);
+            }
+            LinkBack::WithinWatchdog => {
+                record.recovery_ms = Some(far_back.as_secs_f64() * 1e3);
+                record.note += "the far end was back within the watchdog: no stop; ";
+                if let Some(up) = up_ns {
+                    record.violation = Some(format!(
+                        "no watchdog stop while the link was down for {:.0} ms: commands went on",
+                        up.saturating_sub(down_ns) as f64 * 1e-6
+                    ));
+                }
+            }
+            LinkBack::Never(why) => record.note += &why,
+        }
+        record.survived = record.recovery_ms.is_some() && !record.note.contains("outlived");
+        Ok(Some(record))
+    }
+
+    /// The live bridge phase's figures.
+    fn print_live(&self) {
+        println!(
+            "live bridge phase: {} faults across the link in {} live sessions, seed {}, {:.0} s wall (the realtime clock at 640 Hz; physics, the estimator and the goal's judge on the robot's side; the far planner, `--mode serve`, pursuing `agp goal --place {}` beyond a TCP proxy that cuts the link; physics's watchdog {} ms)",
+            self.faults.len(),
+            self.runs.len(),
+            self.args.seed,
+            self.started.elapsed().as_secs_f64(),
+            LIVE_GOAL.join(" "),
+            WATCHDOG.as_millis()
+        );
+        println!(
+            "{:<34} {:>8} {:>8} {:>13} {:>13} {:>14} {:>11} {:>20}",
+            "fault",
+            "injected",
+            "survived",
+            "recovery p50",
+            "recovery max",
+            "stops (moving)",
+            "stop after",
+            "motion while down"
+        );
+        let row = |label: &str, of: &[&LinkFaultRecord]| {
+            let rec: Vec<f64> = of.iter().filter_map(|f| f.recovery_ms).collect();
+            let stops: Vec<&LoggedStop> = of.iter().filter_map(|f| f.stop.as_ref()).collect();
+            let after: Vec<f64> = stops.iter().map(|s| s.stopped_after_ms()).collect();
+            let moved = stops
+                .iter()
+                .filter(|s| s.accounted)
+                .fold((0.0_f64, 0.0_f64), |m, s| {
+                    (m.0.max(s.motion_mm), m.1.max(s.turn_deg))
+                });
+            println!(
+                "{:<34} {:>8} {:>8} {:>10} ms {:>10} ms {:>14} {:>8} ms {:>20}",
+                label,
+                of.len(),
+                of.iter().filter(|f| f.survived).count(),
+                ms(median(&rec)),
+                ms(max(&rec)),
+                format!(
+                    "{} ({})",
+                    stops.len(),
+                    stops.iter().filter(|s| s.was_moving()).count()
+                ),
+                ms(max(&after)),
+                if stops.is_empty() {
+                    "-".to_owned()
+                } else {
+                    format!("{:.3} mm {:.3} deg", moved.0, moved.1)
+                }
+            );
+        };
+        for kind in LinkFault::ALL {
+            let of: Vec<&LinkFaultRecord> = self.faults.iter().filter(|f| f.kind == kind).collect();
+            row(kind.label(), &of);
+        }
+        let all: Vec<&LinkFaultRecord> = self.faults.iter().collect();
+        row("all", &all);
+        let count = |f: &dyn Fn(&LinkRunRecord) -> bool| self.runs.iter().filter(|r| f(r)).count();
+        let ends: BTreeMap<&str, usize> = self
+            .runs
+            .iter()
+            .filter_map(|r| r.goal_end.as_deref())
+            .fold(BTreeMap::new(), |mut m, e| {
+                *m.entry(e).or_default() += 1;
+                m
+            });
+        println!(
+            "sessions {}: completed {}, goals reached {}, goals ended {:?}, not done {}, lost {}, files left {}",
+            self.runs.len(),
+            count(&|r| r.completed),
+            count(&|r| r.placed),
+            ends,
+            count(&|r| r.goal_end.is_none()),
+            count(&|r| !r.completed),
+            self.runs.iter().map(|r| r.files_left).sum::<usize>()
+        );
+        let motion = self.runs.iter().fold((0.0_f64, 0.0_f64), |m, r| {
+            (m.0.max(r.motion.0), m.1.max(r.motion.1))
+        });
+        println!(
+            "physics's own account over every session: {} watchdog stops, robot motion beyond one watchdog period after a stop at most {:.3} mm, {:.3} deg; faults with a command applied while the link was down, or a stop later than the watchdog, or motion: {}",
+            self.runs.iter().map(|r| r.watchdog_stops).sum::<usize>(),
+            motion.0,
+            motion.1,
+            self.faults.iter().filter(|f| f.violation.is_some()).count()
+        );
+        for f in self
+            .faults
+            .iter()
+            .filter(|f| !f.survived || f.violation.is_some())
+        {
+            println!(
+                "  {}: run {} at {:.1} s: {}: {}{}",
+                if f.survived {
+                    "VIOLATION"
+                } else {
+                    "NOT SURVIVED"
+                },
+                f.run,
+                f.at_s,
+                f.kind.label(),
+                f.violation.as_deref().unwrap_or_default(),
+                f.note
+            );
+        }
+        for r in self
+            .runs
+            .iter()
+            .filter(|r| !r.completed || r.goal_end.is_none() || r.files_left > 0)
+        {
+            println!(
+                "  RUN {} (`{}`/`{}`, {} fault(s), {} up(s) of the planner side, exits {:?}, {} file(s) left): {}",
+                r.index, r.robot, r.planner, r.faults, r.planner_ups, r.exits, r.files_left, r.note
+            );
+        }
+    }
+}
+
+/// The goal of a live session across the link, once the robot's side says it is done (at
+/// most `timeout`); `None` when it is not, or a side ended.
+fn await_goal_on(run: &mut LinkRun<'_>, timeout: Duration) -> Result<Option<Value>> {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        if run.side_ended().is_some() {
+            return Ok(None);
+        }
+        if let Some(g) = goal_of(&run.robot)?.filter(|g| g["state"] == "done") {
+            return Ok(Some(g));
+        }
+        sleep_checked(Duration::from_millis(250))?;
+    }
+    Ok(None)
+}
+
 /// The bridge phase: `args.bridge_faults` faults across the link, into placements split
-/// over two instances.
+/// over two instances; or (`live`) the live bridge phase, `args.bridge_live_faults` into
+/// live sessions on the realtime clock.
 fn bridge_phase<'a>(
     args: &'a Args,
     bins: &'a Bins,
     work: &'a Path,
     ag_file: &'a Path,
+    live: bool,
 ) -> Result<LinkCampaign<'a>> {
     let mut c = LinkCampaign {
         args,
         bins,
         work,
         ag_file,
-        rng: Rng::stream(args.seed, 31),
+        rng: Rng::stream(args.seed, if live { 32 } else { 31 }),
         deck: LinkFault::ALL.to_vec(),
         next: usize::MAX,
         faults: Vec::new(),
         runs: Vec::new(),
         started: Instant::now(),
+        live,
+    };
+    let wanted = if live {
+        args.bridge_live_faults
+    } else {
+        args.bridge_faults
     };
     let mut index = 0;
-    while (c.faults.len() as u32) < args.bridge_faults {
-        let left = args.bridge_faults - c.faults.len() as u32;
+    while (c.faults.len() as u32) < wanted {
+        let left = wanted - c.faults.len() as u32;
         c.run(index, left.min(args.faults_per_run))?;
         index += 1;
+        if c.live && c.runs.last().is_some_and(|r| r.faults == 0 && !r.completed) {
+            // A session that never took a fault and was lost: another would be too.
+            break;
+        }
     }
-    c.print();
+    if live {
+        c.print_live();
+    } else {
+        c.print();
+    }
     Ok(c)
+}
+
+/// The bridge phases `args` asks for (placements, then live sessions), each printed as it
+/// ends: their JSON and what they missed.
+fn bridge_phases(
+    args: &Args,
+    bins: &Bins,
+    work: &Path,
+    ag_file: &Path,
+) -> Result<(Value, Vec<String>)> {
+    let mut doc = json!({});
+    let mut missed = Vec::new();
+    for (live, wanted, key) in [
+        (false, args.bridge_faults, "bridge"),
+        (true, args.bridge_live_faults, "bridge_live"),
+    ] {
+        if wanted == 0 {
+            continue;
+        }
+        let c = bridge_phase(args, bins, work, ag_file, live)?;
+        doc[key] = c.json();
+        missed.extend(c.missed());
+    }
+    Ok((doc, missed))
 }
 
 fn main() {
@@ -1556,14 +2276,13 @@ fn campaign(args: Args) -> Result<Option<String>> {
         return Ok(report.missed());
     }
     if args.bridge_only {
-        let link = bridge_phase(&args, &bins, work.path(), &ag_file)?;
+        let (doc, missed) = bridge_phases(&args, &bins, work.path(), &ag_file)?;
         if let Some(path) = &args.json {
-            let text = serde_json::to_string_pretty(&json!({ "bridge": link.json() }))
-                .context("cannot format the JSON")?;
+            let text = serde_json::to_string_pretty(&doc).context("cannot format the JSON")?;
             std::fs::write(path, text + "\n")
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
-        return Ok(link.missed());
+        return Ok((!missed.is_empty()).then(|| missed.join("; ")));
     }
     let mut c = Campaign {
         rng: Rng::new(args.seed),
@@ -1593,14 +2312,12 @@ fn campaign(args: Args) -> Result<Option<String>> {
         eprintln!();
     }
     let interrupted = result.as_ref().is_err_and(is_interrupt);
-    let link = if result.is_ok() && c.args.bridge_faults > 0 {
-        Some(bridge_phase(&c.args, &c.bins, c.work.path(), &c.ag_file)?)
+    let (link_json, link_missed) = if result.is_ok() {
+        let (doc, missed) = bridge_phases(&c.args, &c.bins, c.work.path(), &c.ag_file)?;
+        (Some(doc), (!missed.is_empty()).then(|| missed.join("; ")))
     } else {
-        None
+        (None, None)
     };
-    let link_json = link.as_ref().map(LinkCampaign::json);
-    let link_missed = link.as_ref().and_then(LinkCampaign::missed);
-    drop(link);
     let signals = if result.is_ok() && c.args.bench_signals > 0 {
         Some(bench_signal_phase(
             &c.args,
@@ -1619,8 +2336,10 @@ fn campaign(args: Args) -> Result<Option<String>> {
             if let Some(s) = &signals {
                 doc["bench_signals"] = s.json();
             }
-            if let Some(l) = &link_json {
-                doc["bridge"] = l.clone();
+            if let Some(l) = link_json.as_ref().and_then(Value::as_object) {
+                for (key, phase) in l {
+                    doc[key.as_str()] = phase.clone();
+                }
             }
             let text = serde_json::to_string_pretty(&doc).context("cannot format the JSON")?;
             std::fs::write(path, text + "\n")
@@ -2217,5 +2936,40 @@ impl Report {
             "fault_list": faults,
             "run_list": runs,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_instance_of_the_campaign_is_one_agp_down_stale_removes_once_the_campaign_is_dead() {
+        // The longest name: the longest tag, with a pid of 7 digits (the kernel's limit).
+        let longest = format!("bench-{}-v9999r", 4_194_304);
+        agp_runtime::Instance::validate_name(&longest).expect("a valid instance name");
+        for tag in ["f0001", "l0001r", "v0001p"] {
+            let name = run_instance(tag);
+            assert!(
+                name.starts_with(&format!("bench-{}-", std::process::id())),
+                "{name}"
+            );
+            agp_runtime::Instance::validate_name(&name).expect("a valid instance name");
+        }
+        // What a campaign killed with -9 left: its pid is a child's that exited, reaped.
+        let mut child = std::process::Command::new("true")
+            .spawn()
+            .expect("`true` runs");
+        let dead = child.id();
+        child.wait().expect("reaped");
+        let name = format!("bench-{dead}-v0001r");
+        let leftover = Path::new("/dev/shm").join(format!("agp_{name}.leftover"));
+        std::fs::write(&leftover, b"").expect("a file in /dev/shm");
+        let swept = agp_harness::stop::sweep_stale();
+        let gone = !leftover.exists();
+        let _ = std::fs::remove_file(&leftover);
+        let swept = swept.expect("the sweep");
+        assert!(swept.instances.contains(&name), "{swept:?}");
+        assert!(gone, "{} is left", leftover.display());
     }
 }
