@@ -378,6 +378,20 @@ impl GridSetAssembler {
         Ok(())
     }
 
+    /// [`GridSetAssembler::add`], except that a grid the set under way already holds
+    /// starts the set over from it: its publisher is sending the set again (a bridge
+    /// resends the latest grids when its far end comes back), and the partial set from
+    /// before would refuse every grid of the new one.
+    pub fn add_or_start_over(&mut self, grid: &GradientGrid) -> Result<(), GradientFromGridsError> {
+        match self.add(grid) {
+            Err(GradientFromGridsError::Duplicate { .. }) => {
+                self.clear();
+                self.add(grid)
+            }
+            other => other,
+        }
+    }
+
     /// The rebuilt gradient of `object_name`, once the set is complete; the assembler is
     /// then empty, ready for the next set. An incomplete set stays as it is and says what
     /// it lacks.

@@ -251,6 +251,30 @@ fn a_set_missing_a_grid_or_a_whole_alpha_is_refused() {
 }
 
 #[test]
+fn a_set_sent_again_while_under_way_is_taken_from_its_start() {
+    // A bridge whose far end comes back resends the latest set: the planner's assembler
+    // then holds part of that set already, and must take the resent one whole.
+    let ag = learned();
+    let grids = published(&ag, 1);
+    let mut set = GridSetAssembler::new();
+    for g in &grids[..grids.len() / 2] {
+        set.add_or_start_over(g).expect("the first half");
+    }
+    for g in &grids {
+        set.add_or_start_over(g).expect("the set again, whole");
+    }
+    assert!(set.is_complete());
+    assert_eq!(set.finish("disc"), rebuilt(&grids));
+    // The plain `add` still refuses the duplicate: a set holds each grid once.
+    let mut strict = GridSetAssembler::new();
+    strict.add(&grids[0]).expect("first");
+    assert!(matches!(
+        strict.add(&grids[0]),
+        Err(GradientFromGridsError::Duplicate { .. })
+    ));
+}
+
+#[test]
 fn a_duplicated_grid_is_refused() {
     let ag = learned();
     let mut grids = published(&ag, 1);

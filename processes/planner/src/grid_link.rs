@@ -191,7 +191,8 @@ impl std::fmt::Display for EstimatorWaitsToLearn {
 impl std::error::Error for EstimatorWaitsToLearn {}
 
 /// Feeds every grid that arrived into `set`, each read in place and released at once; a
-/// grid of another seq drops the set under way and starts its own.
+/// grid of another seq drops the set under way and starts its own, and so does a grid the
+/// set under way already holds (the same set sent again, as a bridge does on reconnecting).
 fn drain(
     subscriber: &Subscriber<AgpIpc, GradientGrid, ()>,
     set: &mut GridSetAssembler,
@@ -205,7 +206,7 @@ fn drain(
         if set.seq().is_some_and(|s| s != seq) {
             set.clear();
         }
-        if let Err(e) = set.add(grid) {
+        if let Err(e) = set.add_or_start_over(grid) {
             set.clear();
             return Err(e).with_context(|| format!("a grid of seq {seq} was refused"));
         }
