@@ -62,6 +62,13 @@ pub struct ContactPriorConfig {
     /// object turns), which the robot's round front, sliding along the face, does not
     /// follow; one step keeps the prior's turn at the lever arm's.
     pub substeps: u32,
+    /// The limit surface's length `c` as a multiple of the footprint's mean distance from
+    /// its centroid (1: even pressure, a point contact that sticks where it touches).
+    pub limit_surface_scale: f64,
+    /// Later circlings of the task whose border points refine the prior (S and the
+    /// footprint built again from every circling's points, the frame's origin moved to
+    /// their centroid; `agp_perception`'s tracker does it): 0 never.
+    pub refine_circlings: u32,
 }
 
 impl Default for ContactPriorConfig {
@@ -73,6 +80,8 @@ impl Default for ContactPriorConfig {
             trials_per_alpha: 60,
             border_spacing_m: 0.0015,
             substeps: 1,
+            limit_surface_scale: 1.0,
+            refine_circlings: 0,
         }
     }
 }
@@ -303,6 +312,10 @@ pub fn contact_prior(
         ),
         ("border_spacing_m", ok(config.border_spacing_m)),
         ("substeps", (1..=1000).contains(&config.substeps)),
+        (
+            "limit_surface_scale",
+            config.limit_surface_scale.is_finite() && config.limit_surface_scale > 0.0,
+        ),
     ] {
         if !good {
             return Err(ContactPriorBuildError::Config(field));
@@ -318,15 +331,16 @@ pub fn contact_prior(
             half_extent_m,
         });
     }
-    let mechanics =
+    let mut mechanics =
         PushMechanics::from_border(border_obj).ok_or(ContactPriorBuildError::NoFootprint {
             points: border_obj.len(),
         })?;
+    mechanics.c *= config.limit_surface_scale;
     // S: the circling's points, thinned, in every alpha's S.
     let spacing2 = config.border_spacing_m * config.border_spacing_m;
     let mut added: Vec<DVec2> = Vec::with_capacity(border_obj.len());
     for p in border_obj.iter().filter(|p| p.is_finite()) {
-        if added.iter().any(|q| q.distance_squared(*p) < spacing2) {
+        if spacing2 > 0.0 && added.iter().any(|q| q.distance_squared(*p) < spacing2) {
             continue;
         }
         added.push(*p);

@@ -242,6 +242,19 @@ pub struct ObjectTracker {
     prior: Option<(String, ContactPriorConfig)>,
     /// Why the last circling gave no prior, if it did not.
     prior_error: Option<ContactPriorBuildError>,
+    /// Once the prior is built: the border seen so far, which later circlings refine.
+    refinement: Option<PriorRefinement>,
+}
+
+/// An object never pushed, its prior built: what rebuilds it from later circlings
+/// ([`ObjectTracker::refine_prior`]).
+struct PriorRefinement {
+    name: String,
+    config: ContactPriorConfig,
+    /// Border points of every circling so far, object frame (each circling's thinned).
+    border: Vec<DVec2>,
+    /// Later circlings that refined the prior.
+    circlings: u32,
 }
 
 impl ObjectTracker {
@@ -295,6 +308,7 @@ impl ObjectTracker {
             last_learned: None,
             prior: None,
             prior_error: None,
+            refinement: None,
             config,
         })
     }
@@ -303,7 +317,19 @@ impl ObjectTracker {
     /// symmetry order unless the config gives one, and sets the start radius (farthest
     /// learned border point + body radius + start gap). The tracks are kept. Allocates.
     pub fn set_gradient(&mut self, ag: &AffordanceGradient) -> Result<(), TrackerError> {
-        let shape = ag.combined_shape();
+        let state = self.gradient_state(OnlineLearner::new(ag, self.config.online)?)?;
+        self.generation += 1;
+        self.pending = None;
+        self.refinement = None;
+        self.gradient = Some(Box::new(state));
+        Ok(())
+    }
+
+    /// What the tracker keeps of the gradient `learner` learns on: its combined S, the
+    /// matcher on it (the symmetry order learned from S unless the config gives one), the
+    /// start radius (farthest learned border point + body radius + start gap). Allocates.
+    fn gradient_state(&self, learner: OnlineLearner) -> Result<GradientState, TrackerError> {
+        let shape = learner.gradient().combined_shape();
         let order = self
             .config
             .symmetry_order
@@ -320,16 +346,13 @@ impl ObjectTracker {
             .iter()
             .map(|p| p.length())
             .fold(0.0, f64::max);
-        self.generation += 1;
-        self.pending = None;
-        self.gradient = Some(Box::new(GradientState {
-            learner: OnlineLearner::new(ag, self.config.online)?,
+        Ok(GradientState {
+            learner,
             shape,
             matcher,
             start_radius_m: radius + self.robot.body_radius + self.config.start_gap_m,
             symmetry_order: order,
-        }));
-        Ok(())
+        })
     }
 
     /// An object never pushed (no learning phase, no AG file): the first circling that
@@ -367,10 +390,23 @@ impl ObjectTracker {
         let Some(c) = border_centroid(&self.points) else {
             return;
         };
-        let border: Vec<DVec2> = self.points.iter().map(|p| *p - c).collect();
+        let mut border = Vec::with_capacity(self.points.len());
+        thin_into(
+            &mut border,
+            self.points.iter().map(|p| *p - c),
+            config.border_spacing_m,
+        );
         match agp_affordance::contact_prior(&name, &border, &config) {
             Ok(ag) => match self.set_gradient(&ag) {
-                Ok(()) => self.prior_error = None,
+                Ok(()) => {
+                    self.prior_error = None;
+                    self.refinement = Some(PriorRefinement {
+                        name,
+                        config,
+                        border,
+                        circlings: 0,
+                    });
+                }
                 Err(_) => {
                     self.prior_error = Some(ContactPriorBuildError::NoFootprint {
                         points: border.len(),
@@ -379,6 +415,56 @@ impl ObjectTracker {
             },
             Err(e) => self.prior_error = Some(e),
         }
+    }
+
+    /// An object never pushed, at a later circling matched at `self.pose`: the circling's
+    /// border points join those seen before (object frame), and S and the prior are built
+    /// again from them all, the frame's origin moved to their centroid; what the task's
+    /// pushes taught is learned again on the new prior ([`OnlineLearner::rebased`]) and
+    /// the pose moved with the origin. Up to [`ContactPriorConfig::refine_circlings`]
+    /// circlings. Allocates.
+    fn refine_prior(&mut self) {
+        let Some(r) = self.refinement.as_mut() else {
+            return;
+        };
+        if r.circlings >= r.config.refine_circlings {
+            return;
+        }
+        let pose = self.pose;
+        let seen = r.border.len();
+        thin_into(
+            &mut r.border,
+            self.points.iter().map(|p| pose.to_local(*p)),
+            r.config.border_spacing_m,
+        );
+        let (name, config) = (r.name.clone(), r.config);
+        let moved = border_centroid(&r.border)
+            .map(|c| (c, r.border.iter().map(|p| *p - c).collect::<Vec<DVec2>>()));
+        // Each circling's points are thinned among themselves only: the circlings'
+        // points near each other are what averages S.
+        let config = ContactPriorConfig {
+            border_spacing_m: 0.0,
+            ..config
+        };
+        let rebuilt = moved.and_then(|(c, border)| {
+            let base = agp_affordance::contact_prior(&name, &border, &config).ok()?;
+            let learner = self.gradient.as_ref()?.learner.rebased(&base, c).ok()?;
+            let state = self.gradient_state(learner).ok()?;
+            Some((c, border, state))
+        });
+        let Some(r) = self.refinement.as_mut() else {
+            return;
+        };
+        let Some((c, border, state)) = rebuilt else {
+            r.border.truncate(seen);
+            return;
+        };
+        r.border = border;
+        r.circlings += 1;
+        let origin = pose.to_world(c);
+        self.pose = Pose2::new(origin.x, origin.y, pose.theta);
+        self.gradient = Some(Box::new(state));
+        self.generation += 1;
     }
 
     /// The gradient taken by [`ObjectTracker::set_gradient`], if any, as learned on since
@@ -568,7 +654,9 @@ impl ObjectTracker {
         if !(closed || self.points.len() >= 4 * MIN_MATCH_POINTS) {
             return;
         }
+        let built_now = self.gradient.is_none();
         self.take_prior();
+        let mut refine = false;
         if let Some(g) = self.gradient.as_mut() {
             let guess = self.valid.then_some(self.pose);
             if let Some(m) = match_pose(&mut g.matcher, &self.points, guess) {
@@ -601,7 +689,11 @@ impl ObjectTracker {
                 self.match_seq += 1;
                 self.match_rms_m = m.rms_error_m;
                 self.match_inliers = m.inlier_fraction;
+                refine = !built_now;
             }
+        }
+        if refine {
+            self.refine_prior();
         }
         if let Some(c) = border_centroid(&self.points) {
             let r = self
@@ -830,6 +922,19 @@ fn touch_correction(
         total += shift;
     }
     (total.abs() <= 0.015).then(|| Pose2::new(centre.x, centre.y, pose.theta))
+}
+
+/// Appends the points of `points` to `out`, each unless one appended from `points` before
+/// lies closer than `spacing` (m; 0 keeps every point).
+fn thin_into(out: &mut Vec<DVec2>, points: impl Iterator<Item = DVec2>, spacing: f64) {
+    let from = out.len();
+    let spacing2 = spacing * spacing;
+    for p in points.filter(|p| p.is_finite()) {
+        if spacing2 > 0.0 && out[from..].iter().any(|q| q.distance_squared(p) < spacing2) {
+            continue;
+        }
+        out.push(p);
+    }
 }
 
 /// The centroid of the area a circled border encloses: the points binned by angle round

@@ -118,11 +118,26 @@ pub(crate) struct PendingPush {
     pub scale: f64,
 }
 
+/// One update of an [`OnlineLearner`], kept so that it can be made again on a rebuilt
+/// prior ([`OnlineLearner::rebased`]): the uniform gains, then the push learned at its
+/// contact point (alpha, outcome), if it was.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Update {
+    gains: (f64, f64),
+    local: Option<(f64, PushOutcome)>,
+}
+
+/// Updates kept for [`OnlineLearner::rebased`] without allocating: more than a task's
+/// pushes (150).
+const HISTORY_CAPACITY: usize = 256;
+
 /// Learns a gradient on from observed pushes (see the module's documentation).
 pub struct OnlineLearner {
     config: OnlineLearningConfig,
     learner: AffordanceLearner,
     pushes_learned: u64,
+    /// Every update so far, in order.
+    history: Vec<Update>,
 }
 
 impl OnlineLearner {
@@ -141,7 +156,39 @@ impl OnlineLearner {
             config,
             learner: AffordanceLearner::resume(ag.clone(), &learner_config)?,
             pushes_learned: 0,
+            history: Vec::with_capacity(HISTORY_CAPACITY),
         })
+    }
+
+    /// The same learning made again on `base` (a prior rebuilt from more of the object's
+    /// border, its frame's origin at `shift` of this one's, the axes alike): every update
+    /// in order, each push's contact point moved into the new frame and its displacement
+    /// made the new origin's (`d + (R(rotation) - I) shift`). The gains are the ones
+    /// learned, not measured again against the new prior. Allocates.
+    pub fn rebased(
+        &self,
+        base: &AffordanceGradient,
+        shift: DVec2,
+    ) -> Result<Self, LearnerBuildError> {
+        let mut rebased = Self::new(base, self.config)?;
+        for u in &self.history {
+            rebased.learner.scale_motion(u.gains.0, u.gains.1);
+            if let Some((alpha, push)) = u.local {
+                let moved = PushOutcome {
+                    contact_point_obj: push.contact_point_obj - shift,
+                    displacement_obj: push.displacement_obj
+                        + (DVec2::from_angle(push.rotation_rad).rotate(shift) - shift),
+                    ..push
+                };
+                // It was learned once; the frames differ by millimetres.
+                let _ = rebased
+                    .learner
+                    .add_recent_push(alpha, &moved, self.config.forgetting);
+            }
+            rebased.history.push(*u);
+        }
+        rebased.pushes_learned = self.pushes_learned;
+        Ok(rebased)
     }
 
     /// The gradient as learned so far.
@@ -165,7 +212,8 @@ impl OnlineLearner {
     /// predictor's, and `period_rad` the orientation's symmetry period (infinite for no
     /// symmetry, 0 for a disc: its rotation is not observed and not learned). `None` when
     /// the push is not learned (disabled, too short a push, nothing predicted there, a
-    /// sample out of range). Allocates nothing.
+    /// sample out of range). Allocates nothing (past 256 pushes learned, the history it
+    /// keeps for [`OnlineLearner::rebased`] grows).
     pub(crate) fn learn(
         &mut self,
         push: PendingPush,
@@ -226,6 +274,10 @@ impl OnlineLearner {
                 .add_recent_push(push.alpha_deg, &observed, c.forgetting)
                 .is_ok();
         self.pushes_learned += 1;
+        self.history.push(Update {
+            gains: (gain_d, gain_r),
+            local: local.then_some((push.alpha_deg, observed)),
+        });
         Some(LearnedPush {
             contact_obj: push.contact_obj,
             alpha_deg: push.alpha_deg,
@@ -234,5 +286,86 @@ impl OnlineLearner {
             gains: (gain_d, gain_r),
             local,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use agp_affordance::{ContactPriorConfig, contact_prior};
+
+    /// Border points of a square of half side `h` round `centre`, 40 per side.
+    fn square(h: f64, centre: DVec2) -> Vec<DVec2> {
+        (0..160)
+            .map(|k| {
+                let u = -h + 2.0 * h * f64::from(k % 40) / 40.0;
+                centre
+                    + match k / 40 {
+                        0 => DVec2::new(u, -h),
+                        1 => DVec2::new(h, u),
+                        2 => DVec2::new(-u, h),
+                        _ => DVec2::new(-h, -u),
+                    }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_rebased_learner_learns_the_same_pushes_again_in_the_new_frame() {
+        let config = ContactPriorConfig {
+            trials_per_alpha: 12,
+            ..ContactPriorConfig::default()
+        };
+        let prior = contact_prior("box", &square(0.03, DVec2::ZERO), &config).expect("a prior");
+        let mut learner =
+            OnlineLearner::new(&prior, OnlineLearningConfig::updating()).expect("a learner");
+        let shape = prior.combined_shape();
+        let start_radius = 0.03 * 2f64.sqrt() + 0.057;
+        // A push at the -x face, alpha 0, observed to move the object 30 mm and turn it
+        // 10 deg.
+        let push = PendingPush {
+            before: Pose2::new(0.0, 0.0, 0.0),
+            contact_obj: DVec2::new(-0.03, 0.01),
+            alpha_deg: 0.0,
+            scale: 1.0,
+        };
+        let after = Pose2::new(0.03, 0.0, 10f64.to_radians());
+        let learned = learner
+            .learn(push, after, &shape, start_radius, f64::INFINITY)
+            .expect("learned");
+        assert!(learned.local);
+        // Again on the same prior, the frame unmoved: the same gradient.
+        let again = learner.rebased(&prior, DVec2::ZERO).expect("rebased");
+        assert_eq!(again.gradient(), learner.gradient());
+        assert_eq!(again.pushes_learned(), 1);
+        // On a base of S alone, its origin 2 mm off the old one's: the push alone predicts
+        // at its contact point moved into the new frame, the displacement the new
+        // origin's.
+        let mut s_only = AffordanceLearner::new(
+            "box",
+            &LearnerConfig {
+                alphas_deg: prior.alphas_deg().collect(),
+                ..LearnerConfig::default()
+            },
+        )
+        .expect("a learner");
+        for alpha in prior.alphas_deg().collect::<Vec<_>>() {
+            for p in square(0.03, DVec2::ZERO) {
+                s_only.add_border_point(alpha, p).expect("a border point");
+            }
+        }
+        let shift = DVec2::new(0.002, -0.001);
+        let moved = learner.rebased(s_only.gradient(), shift).expect("rebased");
+        let p = moved
+            .gradient()
+            .predict(push.contact_obj - shift, 0.0)
+            .expect("a prediction");
+        let turn = 10f64.to_radians();
+        let expected = DVec2::new(0.03, 0.0) + (DVec2::from_angle(turn).rotate(shift) - shift);
+        assert!(
+            (p.displacement - expected).length() < 1e-6,
+            "{p:?} vs {expected}"
+        );
+        assert!((p.rotation_rad - turn).abs() < 1e-6, "{p:?}");
     }
 }

@@ -23,6 +23,8 @@ pub struct InProcessWorld {
     estimate: ObjectEstimate,
     /// The tracker's gradient generation the planner has (online learning).
     served_generation: u64,
+    /// The grids seq the next frame's estimate carries: the generation at the last frame.
+    grids_seq: u64,
 }
 
 impl InProcessWorld {
@@ -54,6 +56,7 @@ impl InProcessWorld {
             tracker,
             estimate: ObjectEstimate::default(),
             served_generation,
+            grids_seq: served_generation,
         };
         world.perceive();
         Ok(world)
@@ -66,10 +69,13 @@ impl InProcessWorld {
             .observe(s.ir_sample, &s.ir_raw, s.odometry, s.fix, s.fix_seq);
         self.estimate = ObjectEstimate {
             step: self.sim.step_count(),
-            // The set the estimator would have published: one per gradient version.
-            grids_seq: self.tracker.gradient_generation(),
+            // The set the estimator would have published, one per gradient version: a
+            // version made at a frame (a circling's end) shows from the next frame, as
+            // the estimator publishes the grids after that frame's estimate.
+            grids_seq: self.grids_seq,
             ..ObjectEstimate::default()
         };
+        self.grids_seq = self.tracker.gradient_generation();
         self.tracker.write_estimate(&mut self.estimate);
     }
 
