@@ -186,14 +186,7 @@ pub fn run_episode(
     task: &Task,
     config: &EpisodeConfig,
 ) -> Result<EpisodeResult, InProcessEpisodeError> {
-    let sim = Sim::new(
-        scenario,
-        robot,
-        SimConfig {
-            seed: config.seed,
-            ..SimConfig::default()
-        },
-    )?;
+    let sim = seeded_sim(scenario, robot, config.seed)?;
     let mut world = InProcessWorld::new(sim, robot, ag)?;
     let modelled;
     let config = if planner == PlannerKind::Model && config.model.is_none() {
@@ -212,6 +205,22 @@ pub fn run_episode(
     Ok(result.judged(task, scenario.object.shape.symmetry_order(), config))
 }
 
+/// The physics of one episode: `scenario` with `robot`, its noise drawn from `seed`.
+fn seeded_sim(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    seed: u64,
+) -> Result<Sim, SimBuildError> {
+    Sim::new(
+        scenario,
+        robot,
+        SimConfig {
+            seed,
+            ..SimConfig::default()
+        },
+    )
+}
+
 /// Runs one episode of an object never pushed before (`agp bench online --in-process`):
 /// as [`run_episode`], but the tracker starts without a gradient, builds the contact prior
 /// from the episode's first circling and learns on from every push
@@ -225,14 +234,7 @@ pub fn run_online_episode(
     task: &Task,
     config: &EpisodeConfig,
 ) -> Result<EpisodeResult, InProcessEpisodeError> {
-    let sim = Sim::new(
-        scenario,
-        robot,
-        SimConfig {
-            seed: config.seed,
-            ..SimConfig::default()
-        },
-    )?;
+    let sim = seeded_sim(scenario, robot, config.seed)?;
     let mut world = InProcessWorld::with_tracker(
         sim,
         robot,

@@ -983,6 +983,24 @@ struct LinkFaultRecord {
     note: String,
 }
 
+impl LinkFaultRecord {
+    /// A fault of `kind` in run `run`, `at_s` into it, nothing yet known of its outcome.
+    fn new(run: usize, kind: LinkFault, at_s: f64) -> Self {
+        Self {
+            run,
+            kind,
+            at_s,
+            pause_ms: None,
+            survived: false,
+            recovery_ms: None,
+            steps_while_cut: None,
+            stop: None,
+            violation: None,
+            note: String::new(),
+        }
+    }
+}
+
 /// One run of the bridge phase: a placement split over two instances.
 #[derive(Debug, Clone)]
 struct LinkRunRecord {
@@ -1347,18 +1365,7 @@ impl<'a> LinkCampaign<'a> {
         let Some(pid) = bridge.pid.filter(|&p| self.bins.owns(p)) else {
             return Ok(None);
         };
-        let mut record = LinkFaultRecord {
-            run: index,
-            kind,
-            at_s: run.started.elapsed().as_secs_f64(),
-            pause_ms: None,
-            survived: false,
-            recovery_ms: None,
-            steps_while_cut: None,
-            stop: None,
-            violation: None,
-            note: String::new(),
-        };
+        let mut record = LinkFaultRecord::new(index, kind, run.started.elapsed().as_secs_f64());
         let all = |s: &Status| s.all_running(&["robot", "planner"]);
         let pause = Duration::from_secs_f64(self.rng.range(0.2, 2.0));
         let back = match kind {
@@ -1922,18 +1929,7 @@ impl<'a> LinkCampaign<'a> {
         else {
             return Ok(None);
         };
-        let mut record = LinkFaultRecord {
-            run: index,
-            kind,
-            at_s: run.started.elapsed().as_secs_f64(),
-            pause_ms: None,
-            survived: false,
-            recovery_ms: None,
-            steps_while_cut: None,
-            stop: None,
-            violation: None,
-            note: String::new(),
-        };
+        let mut record = LinkFaultRecord::new(index, kind, run.started.elapsed().as_secs_f64());
         let all = |s: &Status| s.all_running(&["robot", "planner"]);
         let pause = Duration::from_secs_f64(self.rng.range(LIVE_PAUSE_S.0, LIVE_PAUSE_S.1));
         let t0 = Instant::now();
