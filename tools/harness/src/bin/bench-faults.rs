@@ -749,15 +749,33 @@ fn queue_goal_on(s: &Session<'_>) -> Result<()> {
 /// The goal of a live session as `agp status --json` shows it, once it is done (at most
 /// `timeout`); `None` when it is not.
 fn await_goal(run: &mut Run<'_>, timeout: Duration) -> Result<Option<Value>> {
+    await_done_goal(
+        run,
+        |r| r.ended().is_some(),
+        |r| &r.session,
+        timeout,
+        Duration::from_millis(500),
+    )
+}
+
+/// The goal `session_of(run)` shows once it is done, asked every `every` for at most
+/// `timeout`; `None` when it is not done by then or `ended(run)` says the run ended.
+fn await_done_goal<'s, R>(
+    run: &mut R,
+    mut ended: impl FnMut(&mut R) -> bool,
+    session_of: impl Fn(&R) -> &Session<'s>,
+    timeout: Duration,
+    every: Duration,
+) -> Result<Option<Value>> {
     let deadline = Instant::now() + timeout;
     while Instant::now() < deadline {
-        if run.ended().is_some() {
+        if ended(run) {
             return Ok(None);
         }
-        if let Some(g) = goal_of(&run.session)?.filter(|g| g["state"] == "done") {
+        if let Some(g) = goal_of(session_of(run))?.filter(|g| g["state"] == "done") {
             return Ok(Some(g));
         }
-        sleep_checked(Duration::from_millis(500))?;
+        sleep_checked(every)?;
     }
     Ok(None)
 }
@@ -2146,17 +2164,13 @@ impl<'a> LinkCampaign<'a> {
 /// The goal of a live session across the link, once the robot's side says it is done (at
 /// most `timeout`); `None` when it is not, or a side ended.
 fn await_goal_on(run: &mut LinkRun<'_>, timeout: Duration) -> Result<Option<Value>> {
-    let deadline = Instant::now() + timeout;
-    while Instant::now() < deadline {
-        if run.side_ended().is_some() {
-            return Ok(None);
-        }
-        if let Some(g) = goal_of(&run.robot)?.filter(|g| g["state"] == "done") {
-            return Ok(Some(g));
-        }
-        sleep_checked(Duration::from_millis(250))?;
-    }
-    Ok(None)
+    await_done_goal(
+        run,
+        |r| r.side_ended().is_some(),
+        |r| &r.robot,
+        timeout,
+        Duration::from_millis(250),
+    )
 }
 
 /// The bridge phase: `args.bridge_faults` faults across the link, into placements split
