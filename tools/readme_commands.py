@@ -30,6 +30,10 @@ one), then the first `agp up`'s effect: `results/triangle.ag` copied from `--ag`
 it, the first `agp up` is run: minutes on a debug build). After every command, `git status
 --porcelain` in the clone must be empty: what the README makes goes to ignored folders.
 
+Before any command runs, `tools/doc_refs.py` checks that every path, test, Rust name, flag and
+environment variable README.md, ARCHITECTURE.md and RELIABILITY.md cite exists in the tree (a
+miss fails the check, as a command without a rule does).
+
 Exit 0 when every command exited as expected and the clone is clean; else 1, naming each
 failure. The last lines list what was not run and why.
 """
@@ -49,6 +53,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tools"))
+import doc_refs  # noqa: E402  (tools/doc_refs.py: the docs' cited names exist)
 # The README and every example's README (a new example's commands need rules too).
 READMES = ["README.md"] + sorted(str(p.relative_to(ROOT)) for p in ROOT.glob("examples/*/README.md"))
 TIMEOUT_S = 300  # a safety net per command; no check depends on it
@@ -85,7 +91,7 @@ RULES = [
     Rule(rf"{R}agp bench trajectory --scenario lshape --json results/trajectory\.json --plot results/trajectory\.svg", "args",
          "five paths x 5 seeds x 2 planners of 15-60 pushes each: minutes; tests/tests/bench_cli.rs runs one path"),
     Rule(rf"{R}agp bench paper --json results/paper\.json", "args",
-         "9 minutes in release; its --check is held by bench_paper.rs's each_target_made_unreachable_is_named_as_missed"),
+         "15 minutes in release (891 s for 5 seeds, 2026-11-28); its --check is held by bench_paper.rs's each_target_made_unreachable_is_named_as_missed"),
     Rule(rf"{R}agp bench place --seeds 20 --shard 1/4 --json results/part-1\.json", "small",
          "2 seeds in 2 shards, one baseline episode each, on the AG of the first `agp up`, in place of 20 seeds of every planner: both shards run, then the merge below",
          "{bin}/agp bench place --seeds 2 --shard 1/2 --episodes 1 --planners baseline --ag results/triangle.ag --json results/part-1.json && "
@@ -226,7 +232,8 @@ def main() -> int:
     a = ap.parse_args()
 
     found = commands(ROOT)
-    problems = []
+    # What the three docs cite (paths, tests, Rust names, flags, variables) exists in the tree.
+    problems = doc_refs.check(ROOT)
     for cmd in found:
         n = len(rule_of(cmd))
         if n != 1:
