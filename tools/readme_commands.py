@@ -31,8 +31,10 @@ it, the first `agp up` is run: minutes on a debug build). After every command, `
 --porcelain` in the clone must be empty: what the README makes goes to ignored folders.
 
 Before any command runs, `tools/doc_refs.py` checks that every path, test, Rust name, flag and
-environment variable README.md, ARCHITECTURE.md and RELIABILITY.md cite exists in the tree (a
-miss fails the check, as a command without a rule does).
+environment variable README.md, ARCHITECTURE.md and RELIABILITY.md cite exists in the tree, and
+`tools/doc_behaviour.py` that each flag the docs give a binary is in its `--help` and each
+refusal they quote is said so by the `--bin` build (a miss fails the check, as a command
+without a rule does).
 
 Exit 0 when every command exited as expected and the clone is clean; else 1, naming each
 failure. The last lines list what was not run and why.
@@ -54,6 +56,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
+import doc_behaviour  # noqa: E402  (tools/doc_behaviour.py: the docs' flags and quoted refusals hold)
 import doc_refs  # noqa: E402  (tools/doc_refs.py: the docs' cited names exist)
 # The README and every example's README (a new example's commands need rules too).
 READMES = ["README.md"] + sorted(str(p.relative_to(ROOT)) for p in ROOT.glob("examples/*/README.md"))
@@ -251,6 +254,11 @@ def main() -> int:
         return 0
 
     bin_dir = str(Path(a.bin).resolve())
+    held, misses = doc_behaviour.check(Path(bin_dir))
+    print(f"docs' flags and quoted refusals: {held} held, {len(misses)} missed", flush=True)
+    if misses:
+        print("\n".join(misses))
+        return 1
     subst = {"bin": bin_dir, "python": os.path.abspath(a.python), "live": f"rc-live-{os.getpid()}"}
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(a.tree).resolve() if a.tree else clone(Path(tmp))
