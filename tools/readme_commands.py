@@ -79,6 +79,7 @@ LIVE = "the live session started just above"
 RULES = [
     # The first lines of the README: builds and the test command itself.
     Rule(r"cargo build --release --workspace --bins", "skip", "the build; CI builds the workspace itself"),
+    Rule(r"cargo build --release", "skip", "the first command's build (the default members: agp and the run's three processes); CI builds the workspace itself"),
     Rule(rf"{R}agp up", "skip", "the first `agp up` (the learning phase and a placement): its result, results/triangle.ag, is put in the clone instead; tests/tests/learn_pipeline.rs and supervisor_up.rs run it"),
     Rule(r"tools/setup\.sh", "skip", "the set-up the test command runs before this check"),
     Rule(r"cargo build --workspace --bins", "skip", "the build CI runs before this check"),

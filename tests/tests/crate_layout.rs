@@ -56,7 +56,11 @@ fn no_process_crate_depends_on_another_process_crate_or_on_the_harness_but_the_s
         .filter(|(_, (dir, _))| dir.starts_with("processes/"))
         .map(|(name, _)| name)
         .collect();
-    assert_eq!(processes.len(), 4, "four process crates: {processes:?}");
+    assert_eq!(
+        processes.len(),
+        5,
+        "five process crates (the bridge's too): {processes:?}"
+    );
     for (name, (dir, deps)) in &members {
         if !dir.starts_with("processes/") {
             continue;
@@ -73,6 +77,35 @@ fn no_process_crate_depends_on_another_process_crate_or_on_the_harness_but_the_s
                 );
             }
         }
+    }
+}
+
+/// The README's first command, `cargo build --release`, builds the workspace's default
+/// members: `agp` and the three processes of a run. None of them links Zenoh (the bridge is
+/// the `agp-bridge` binary's, built by `--workspace --bins`): a third of a cold build.
+#[test]
+fn the_first_commands_build_links_no_zenoh_and_no_tls() {
+    let out = std::process::Command::new(env!("CARGO"))
+        .args(["tree", "--offline", "-e", "normal", "--prefix", "none"])
+        .current_dir(workspace_root())
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        out.status.success(),
+        "cargo tree: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let tree = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        tree.lines().any(|l| l.starts_with("agp-supervisor ")),
+        "the default members include `agp`:\n{tree}"
+    );
+    for heavy in ["zenoh ", "rustls ", "rcgen ", "agp-bridge-process "] {
+        assert!(
+            !tree.lines().any(|l| l.starts_with(heavy)),
+            "`cargo build --release` would build `{}`",
+            heavy.trim()
+        );
     }
 }
 

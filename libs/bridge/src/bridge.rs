@@ -72,7 +72,7 @@ pub struct BridgeConfig {
     /// Prefix of the bridge's two iceoryx2 node names (`<prefix>-out`, `<prefix>-in`).
     pub node_name: String,
     /// How both threads wait for the next message (`agp bridge` gives `block` unless
-    /// [`BRIDGE_WAIT_ENV`] or `--wait` says otherwise).
+    /// [`crate::BRIDGE_WAIT_ENV`] or `--wait` says otherwise).
     pub wait: WaitStrategy,
     /// How long the far end may be gone (no peer on the link) once it had joined before
     /// this end gives up ([`BridgeEnd::FarGone`]); a cut or a restart of the far bridge
@@ -85,12 +85,6 @@ pub struct BridgeConfig {
     /// with a stale command, and is never sent.
     pub redeliver_command: bool,
 }
-
-/// The environment variable that says how a bridge's threads wait ([`BridgeConfig::wait`],
-/// `agp bridge --wait`), named as `AGP_WAIT` names a strategy; `block` when unset. Not
-/// `AGP_WAIT` itself: a bridge is woken by the kernel (an iceoryx2 event's socket, Zenoh's
-/// receiving thread), and one that polls takes the cores from the threads it waits for.
-pub const BRIDGE_WAIT_ENV: &str = "AGP_BRIDGE_WAIT";
 
 /// The default of [`BridgeConfig::far_timeout`]: longer than a far bridge's restart, or a
 /// far supervisor's `agp up` again after it was killed, on a loaded machine.

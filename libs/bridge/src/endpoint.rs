@@ -3,6 +3,7 @@
 //! (both ends show a certificate of the link's CA, [`crate::tls`]); `tcp/HOST:PORT` is plain
 //! TCP, with no authentication and no encryption.
 
+#[cfg(feature = "link")]
 use crate::tls::TlsKeys;
 
 /// One end of the link: `tls/HOST:PORT` or `tcp/HOST:PORT`, listened on or connected to.
@@ -84,6 +85,7 @@ impl Endpoint {
         Ok(Self::Connect(locator.to_owned()))
     }
 
+    #[cfg(feature = "link")]
     /// The Zenoh configuration of this end: a peer that listens on this endpoint only, or
     /// connects to it only (and listens nowhere), with multicast and gossip scouting off,
     /// so the bridge opens no socket but the one named. A `tls/` endpoint takes `tls`, the
@@ -141,6 +143,7 @@ impl Endpoint {
     }
 }
 
+#[cfg(feature = "link")]
 /// `s` as a JSON string literal (the locators hold no quote or backslash once checked, but
 /// the escaping costs nothing).
 fn serde_json_string(s: &str) -> String {

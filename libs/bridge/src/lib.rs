@@ -9,22 +9,36 @@
 //! The link runs over Zenoh's TLS transport with mutual authentication ([`tls`]: a CA of
 //! the link's own, a certificate per side), or over plain TCP when asked for explicitly.
 
+#[cfg(feature = "link")]
 mod bridge;
 mod endpoint;
+#[cfg(feature = "link")]
 mod floor;
+#[cfg(feature = "link")]
+mod keygen;
+#[cfg(feature = "link")]
 mod ports;
 mod route;
 pub mod tls;
 pub mod wire;
 
-pub use bridge::{
-    BRIDGE_WAIT_ENV, BridgeConfig, BridgeEnd, BridgeError, BridgeReport, FAR_TIMEOUT, run_bridge,
-};
+#[cfg(feature = "link")]
+pub use bridge::{BridgeConfig, BridgeEnd, BridgeError, BridgeReport, FAR_TIMEOUT, run_bridge};
 pub use endpoint::{Endpoint, EndpointParseError};
+#[cfg(feature = "link")]
 pub use floor::{FloorError, FloorFigures, floor_ping, floor_pong};
+#[cfg(feature = "link")]
+pub use keygen::keygen;
+#[cfg(feature = "link")]
 pub use ports::Restamp;
 pub use route::{
     BRIDGED_TOPICS, BridgedTopic, Latch, Side, TopicListParseError, all_topics, bridged_topic,
     parse_topics,
 };
-pub use tls::{TlsError, TlsKeys, keygen};
+pub use tls::{TlsError, TlsKeys};
+
+/// The environment variable that says how a bridge's threads wait (`BridgeConfig::wait`,
+/// `agp bridge --wait`), named as `AGP_WAIT` names a strategy; `block` when unset. Not
+/// `AGP_WAIT` itself: a bridge is woken by the kernel (an iceoryx2 event's socket, Zenoh's
+/// receiving thread), and one that polls takes the cores from the threads it waits for.
+pub const BRIDGE_WAIT_ENV: &str = "AGP_BRIDGE_WAIT";

@@ -23,6 +23,33 @@ pub const BRIDGE_CHECKS: RemoteChecks = RemoteChecks {
     security_fault: agp_bridge::Endpoint::security_fault,
 };
 
+/// The bridge's binary, `agp-bridge`, beside the `agp` at `agp`: `agp bridge` runs it (a
+/// binary of its own, so that `agp` links no Zenoh).
+pub fn bridge_binary(agp: &std::path::Path) -> std::path::PathBuf {
+    agp.with_file_name("agp-bridge")
+}
+
+/// How to build `agp-bridge` when it is not beside the `agp` at `agp`.
+pub fn build_the_bridge_hint(agp: &std::path::Path) -> String {
+    let release = agp
+        .parent()
+        .and_then(|d| d.file_name())
+        .is_some_and(|d| d == "release");
+    format!(
+        "the bridge binary {} is not built: build it with `cargo build{} --workspace --bins` (the first command of the README builds no bridge)",
+        bridge_binary(agp).display(),
+        if release { " --release" } else { "" }
+    )
+}
+
+/// Why process `p` of a plan cannot start, if it is an `agp bridge` and `agp-bridge` is
+/// not built beside its `agp`.
+fn missing_bridge(p: &agp_launch::ProcessConfig) -> Option<String> {
+    let is_bridge = p.exec.file_name().is_some_and(|n| n == "agp")
+        && p.args.first().is_some_and(|a| a == "bridge");
+    (is_bridge && !bridge_binary(&p.exec).is_file()).then(|| build_the_bridge_hint(&p.exec))
+}
+
 /// The checks of a launch file's plan that start processes.
 pub trait CheckProcesses {
     /// Asks every agp planner of the file whether its arguments run on the file's clock
@@ -36,6 +63,16 @@ impl CheckProcesses for LaunchConfig {
     fn check_processes(&self) -> Result<(), LaunchConfigParseError> {
         let mut faults = Vec::new();
         for p in &self.processes {
+            if let Some(reason) = missing_bridge(p) {
+                faults.push(LaunchFault {
+                    line: Some(p.line),
+                    kind: LaunchFaultKind::ProcessRefused {
+                        process: p.name.clone(),
+                        reason,
+                    },
+                });
+                continue;
+            }
             if p.exec.file_stem().and_then(|s| s.to_str()) != Some("agp-planner") {
                 continue;
             }

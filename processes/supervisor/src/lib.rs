@@ -4,4 +4,4 @@ mod goal_spec;
 mod launch_checks;
 
 pub use goal_spec::{GoalSpec, GoalSpecError, check_goal};
-pub use launch_checks::{BRIDGE_CHECKS, CheckProcesses};
+pub use launch_checks::{BRIDGE_CHECKS, CheckProcesses, bridge_binary, build_the_bridge_hint};

@@ -6,7 +6,7 @@ use agp_harness::{
     bench_adapt, bench_learn, bench_merge, bench_paper, bench_tasks, bench_trajectory, probe,
 };
 
-mod bridge;
+mod bridge_process;
 mod console;
 mod control;
 mod control_plane;
@@ -131,14 +131,15 @@ enum Cmd {
     /// memory with it (another computer, or another instance on this one). One end listens,
     /// the other connects; nothing is scouted. The link is mutual TLS with the keys of
     /// `agp bridge keygen DIR`, or plain TCP with `--insecure`. A launch file's
-    /// `remote = { ... }` process runs it with the run.
+    /// `remote = { ... }` process runs it with the run. It runs the bridge binary
+    /// `agp-bridge` beside `agp` (built by `cargo build --release --workspace --bins`).
     ///
     /// Example: agp bridge keygen results/bridge-keys
     ///
     /// Example: agp bridge --instance lab --side robot --listen tls/127.0.0.1:7447 --tls results/bridge-keys
     ///
     /// Example: agp bridge --instance desk --side planner --connect tls/127.0.0.1:7447 --tls results/bridge-keys
-    Bridge(bridge::BridgeArgs),
+    Bridge(bridge_process::BridgeArgs),
     #[command(name = "replay-driver", hide = true)]
     ReplayDriver(replay::DriverArgs),
     #[command(name = "profile-floor-pong", hide = true)]
@@ -250,7 +251,7 @@ fn main() -> ExitCode {
         Cmd::Record(args) => record::run(args),
         Cmd::Export(args) => export::run(args),
         Cmd::Replay(args) => replay::run(args),
-        Cmd::Bridge(args) => bridge::run(args),
+        Cmd::Bridge(args) => bridge_process::run(args),
         Cmd::ReplayDriver(args) => replay::drive(args),
         Cmd::View(args) => view::run(args),
         Cmd::ProfileFloorPong(args) => profile::run_floor_pong(args),

@@ -1225,14 +1225,15 @@ fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<Link
         .processes
         .iter()
         .filter_map(|p| p.pid)
-        .find_map(crate::bridge::bridge_of_process)?;
-    let measured = (|| -> Result<(String, agp_bridge::FloorFigures)> {
+        .find_map(crate::bridge_process::bridge_of_process)?;
+    let measured = (|| -> Result<(String, crate::bridge_process::FloorFigures)> {
         let mut lease = pause
             .map(|i| PauseLease::take(i, Duration::from_secs_f64(seconds) + LEASE_MARGIN))
             .transpose()
             .context("cannot pause the pipeline for the link floor")?;
         // The lease outlasts the floor by LEASE_MARGIN; it is given back right after.
-        let floor = crate::bridge::zenoh_floor(bridge.tls.as_deref(), bridge.wait, seconds, 64);
+        let floor =
+            crate::bridge_process::zenoh_floor(bridge.tls.as_deref(), bridge.wait, seconds, 64);
         if let Some(lease) = &mut lease {
             lease.release()?;
         }

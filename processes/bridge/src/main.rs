@@ -1,24 +1,43 @@
-//! `agp bridge`: forwards chosen topics of a running instance to a Zenoh session and back
-//! (agp-bridge's `run_bridge`), so the planner of one instance drives the physics and
-//! estimator of another that shares no memory with it. A launch file's `remote = { ... }`
-//! process runs it as a child of `agp up`, with the epoch and token of the slot.
+//! `agp-bridge` (run as `agp bridge`): forwards chosen topics of a running instance to a
+//! Zenoh session and back (agp-bridge's `run_bridge`), so the planner of one instance drives
+//! the physics and estimator of another that shares no memory with it. A launch file's
+//! `remote = { ... }` process runs it as a child of `agp up`, with the epoch and token of the
+//! slot; `agp bridge ARGS` hands its arguments to this binary (exec, same pid).
 //!
 //! The link is Zenoh's TLS transport with mutual authentication (`--tls DIR`, a key folder
 //! made by `agp bridge keygen DIR`), or plain TCP only when asked for with `--insecure`.
+//!
+//! A binary of its own so that `agp` links no Zenoh: the README's first command
+//! (`cargo build --release`, the workspace's default members) builds no link, which took a
+//! third of a cold build; `cargo build --release --workspace --bins` builds this too.
 
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use agp_bridge::{BridgeConfig, BridgeEnd, Endpoint, Side, TlsKeys, parse_topics, run_bridge};
-use agp_runtime::WaitStrategy;
+use agp_runtime::{Instance, WaitStrategy};
 use agp_shared_types::{SessionKey, session_token_from_env};
 use anyhow::{Context, Result, anyhow, bail};
+use clap::Parser;
 
-/// `agp bridge`.
-#[derive(Debug, clap::Args)]
+/// Forward chosen topics of a running instance to a Zenoh session and back, so the planner
+/// of one instance drives the physics and estimator of another that shares no memory with it
+/// (another computer, or another instance on this one). One end listens, the other
+/// connects; nothing is scouted. The link is mutual TLS with the keys of `agp bridge keygen
+/// DIR`, or plain TCP with `--insecure`. A launch file's `remote = { ... }` process runs it
+/// with the run.
+///
+/// Example: agp bridge keygen results/bridge-keys
+///
+/// Example: agp bridge --instance lab --side robot --listen tls/127.0.0.1:7447 --tls results/bridge-keys
+///
+/// Example: agp bridge --instance desk --side planner --connect tls/127.0.0.1:7447 --tls results/bridge-keys
+#[derive(Debug, clap::Parser)]
+#[command(name = "agp bridge", bin_name = "agp bridge", version)]
 #[command(subcommand_negates_reqs = true)]
 #[command(group(clap::ArgGroup::new("endpoint").required(true).args(["listen", "connect"])))]
 #[command(group(clap::ArgGroup::new("security").required(true).args(["tls", "insecure"])))]
-pub(crate) struct BridgeArgs {
+struct BridgeArgs {
     #[command(subcommand)]
     command: Option<BridgeCommand>,
     /// The instance whose topics are bridged (a supervisor must run it).
@@ -123,6 +142,10 @@ enum BridgeCommand {
         /// Bytes per sample (a motor command is 64, a frame a few hundred).
         #[arg(long, default_value_t = 64)]
         size: usize,
+        /// Print the figures as one JSON object instead (`agp profile` reads it): the
+        /// locator, the round trips and every one-way figure in ns.
+        #[arg(long)]
+        json: bool,
     },
     /// The far end of `agp bridge floor` (run by it, not by hand).
     #[command(name = "floor-pong", hide = true)]
@@ -167,7 +190,7 @@ impl Security {
 /// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, both
 /// ends waiting as `wait` says (a bridge's `AGP_WAIT`), for `seconds` of timed round trips
 /// of `size` bytes: the locator and the figures.
-pub(crate) fn zenoh_floor(
+fn zenoh_floor(
     tls: Option<&Path>,
     wait: WaitStrategy,
     seconds: f64,
@@ -185,7 +208,7 @@ pub(crate) fn zenoh_floor(
     let locator = format!("{scheme}/127.0.0.1:{port}");
     let exe = std::env::current_exe().context("the path of agp")?;
     let mut cmd = std::process::Command::new(exe);
-    cmd.args(["bridge", "floor-pong", "--listen", &locator])
+    cmd.args(["floor-pong", "--listen", &locator])
         .args(security.args())
         .env(agp_bridge::BRIDGE_WAIT_ENV, wait.name())
         .stdin(std::process::Stdio::null());
@@ -205,13 +228,22 @@ pub(crate) fn zenoh_floor(
 }
 
 /// `agp bridge floor`.
-fn floor(security: &Security, seconds: f64, size: usize) -> Result<u8> {
+fn floor(security: &Security, seconds: f64, size: usize, json: bool) -> Result<u8> {
     let (locator, f) = zenoh_floor(
         security.tls.as_deref(),
         bridge_wait_from_env()?,
         seconds,
         size,
     )?;
+    if json {
+        let doc = serde_json::json!({
+            "locator": locator,
+            "round_trips": f.round_trips,
+            "one_way_ns": f.one_way_ns,
+        });
+        println!("{doc}");
+        return Ok(0);
+    }
     let us = |ns: u64| ns as f64 / 1e3;
     println!(
         "agp: Zenoh floor over {locator} ({}), {size} B samples, {} round trips: one way p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
@@ -240,47 +272,6 @@ fn bridge_wait_from_env() -> Result<WaitStrategy> {
     }
 }
 
-/// A running `agp bridge`, as its command line and environment show it.
-pub(crate) struct RunningBridge {
-    /// The key folder of its link (`None`: plain TCP).
-    pub tls: Option<PathBuf>,
-    /// How its threads wait (`--wait`, else `AGP_BRIDGE_WAIT`, else `block`).
-    pub wait: WaitStrategy,
-}
-
-/// The bridge of a running process `pid`, if it is an `agp bridge`.
-pub(crate) fn bridge_of_process(pid: u32) -> Option<RunningBridge> {
-    let words = |file: &str| -> Option<Vec<String>> {
-        let bytes = std::fs::read(format!("/proc/{pid}/{file}")).ok()?;
-        Some(
-            bytes
-                .split(|b| *b == 0)
-                .map(|a| String::from_utf8_lossy(a).into_owned())
-                .collect(),
-        )
-    };
-    let args = words("cmdline")?;
-    if args.get(1).map(String::as_str) != Some("bridge") {
-        return None;
-    }
-    let after = |flag: &str| args.windows(2).find(|w| w[0] == flag).map(|w| w[1].clone());
-    let env_wait = || {
-        words("environ")?.into_iter().find_map(|kv| {
-            kv.strip_prefix(agp_bridge::BRIDGE_WAIT_ENV)
-                .and_then(|v| v.strip_prefix('='))
-                .map(str::to_owned)
-        })
-    };
-    let wait = after("--wait")
-        .or_else(env_wait)
-        .and_then(|w| WaitStrategy::parse(&w))
-        .unwrap_or(WaitStrategy::Block);
-    Some(RunningBridge {
-        tls: after("--tls").map(PathBuf::from),
-        wait,
-    })
-}
-
 /// `agp bridge floor-pong`: the far end of `agp bridge floor`.
 fn floor_pong(listen: &str, security: &Security) -> Result<u8> {
     agp_runtime::install_shutdown_handler();
@@ -295,7 +286,7 @@ fn floor_pong(listen: &str, security: &Security) -> Result<u8> {
 }
 
 /// The warning a bridge on plain TCP starts with.
-pub(crate) fn insecure_warning(locator: &str) -> String {
+fn insecure_warning(locator: &str) -> String {
     format!(
         "agp: warning: the bridge runs on plain TCP (`{locator}`, insecure): no authentication, no encryption; any host that reaches it can join the link and drive this instance. Use TLS: `agp bridge keygen DIR`, then `--tls DIR` with a `tls/` endpoint"
     )
@@ -315,14 +306,15 @@ fn keygen(dir: &Path, hosts: &[String]) -> Result<u8> {
     Ok(0)
 }
 
-pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
+fn run(args: &BridgeArgs) -> Result<u8> {
     match &args.command {
         Some(BridgeCommand::Keygen { dir, hosts }) => return keygen(dir, hosts),
         Some(BridgeCommand::Floor {
             security,
             seconds,
             size,
-        }) => return floor(security, *seconds, *size),
+            json,
+        }) => return floor(security, *seconds, *size, *json),
         Some(BridgeCommand::FloorPong { listen, security }) => {
             return floor_pong(listen, security);
         }
@@ -351,7 +343,7 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
         eprintln!("{}", insecure_warning(endpoint.locator()));
     }
     let topics = parse_topics(&args.topics)?;
-    let instance = crate::control::running_instance(instance_name)?;
+    let instance = running_instance(instance_name)?;
     let key = SessionKey::from_env().map_err(|e| anyhow!(e))?;
     let config = BridgeConfig {
         side,
@@ -419,4 +411,25 @@ pub(crate) fn run(args: &BridgeArgs) -> Result<u8> {
         return Ok(EXIT_FAR_GONE);
     }
     Ok(0)
+}
+
+/// The instance named `name`, which a supervisor must run (its control service is up).
+fn running_instance(name: &str) -> Result<Instance> {
+    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
+    if !instance.control_exists() {
+        bail!("no supervisor runs instance `{name}` (start it with `agp up`)");
+    }
+    Ok(instance)
+}
+
+fn main() -> ExitCode {
+    agp_runtime::quiet_iceoryx2();
+    let args = BridgeArgs::parse();
+    match run(&args) {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("agp: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
