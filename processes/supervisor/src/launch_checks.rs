@@ -193,6 +193,26 @@ mod tests {
     }
 
     #[test]
+    fn a_remote_process_without_agp_bridge_beside_agp_is_refused_on_its_line_saying_how_to_build_it()
+     {
+        let f = new_fixture();
+        let config = f.parse(REMOTE).expect("a valid file");
+        let e = config.check_processes().expect_err("no agp-bridge in bin/");
+        let shown = e.to_string();
+        assert_eq!(e.faults.len(), 1, "{shown}");
+        assert_eq!(e.faults[0].line, Some(7), "{shown}");
+        assert!(shown.contains("agp-bridge is not built"), "{shown}");
+        assert!(shown.contains("cargo build --workspace --bins"), "{shown}");
+        // Beside agp, it starts.
+        let f = Fixture::new(
+            &["bin/agp-fake", "bin/agp", "bin/agp-bridge"],
+            Some(BRIDGE_CHECKS),
+        );
+        let config = f.parse(REMOTE).expect("a valid file");
+        config.check_processes().expect("agp-bridge is there");
+    }
+
+    #[test]
     fn a_remote_process_with_a_bad_role_endpoint_topic_or_an_exec_is_refused_on_its_line() {
         let f = new_fixture();
         let cases = [
