@@ -15,6 +15,7 @@ mod floor;
 mod ports;
 mod route;
 pub mod tls;
+pub mod trace;
 pub mod wire;
 
 pub use bridge::{
@@ -28,3 +29,4 @@ pub use route::{
     parse_topics,
 };
 pub use tls::{TlsError, TlsKeys, keygen};
+pub use trace::TRACE_ENV;
