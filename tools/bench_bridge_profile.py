@@ -4,7 +4,7 @@ against the link's Zenoh floor measured in the same run.
 
     python3 tools/bench_bridge_profile.py [--bin target/release] [--rounds 5] [--seconds 5]
                                           [--floor-seconds 2] [--ag results/triangle.ag]
-                                          [--out results/bridge-profile]
+                                          [--out results/bridge-profile] [--against DIR] [--trace]
 
 Each round runs, for each transport (TLS, then plain TCP): two lockstep live sessions on
 this machine joined over the loopback by `agp bridge` (physics and the estimator in the
@@ -68,6 +68,17 @@ def launch_files(out: Path, tag: str, ag: Path, endpoint: str, security: str) ->
     return r, p, robot, planner
 
 
+def trace_lines(out: Path, *instances: str) -> list[str]:
+    """The bridges' trace lines (`AGP_BRIDGE_TRACE`) of the instances' logs, as each bridge said
+    them when it stopped."""
+    lines = []
+    for name in instances:
+        log = out / f"agp-up-{name}.log"
+        if log.exists():
+            lines += [l.strip() for l in log.read_text(errors="replace").splitlines() if "agp bridge trace" in l]
+    return lines
+
+
 def one_run(bin_dir: Path, out: Path, ag: Path, keys: Path, tls: bool, k: int, args) -> dict:
     tag = "tls" if tls else "tcp"
     port = free_port()
@@ -86,11 +97,15 @@ def one_run(bin_dir: Path, out: Path, ag: Path, keys: Path, tls: bool, k: int, a
                 "--floor-seconds", str(args.floor_seconds), "--json", str(path),
             )
             (out / f"profile-{tag}-{k}.txt").write_text(prof.stdout)
-            return json.loads(path.read_text())
+            result = json.loads(path.read_text())
         finally:
             agp(bin_dir, "down", "--instance", planner, check=False)
     finally:
         agp(bin_dir, "down", "--instance", robot, check=False)
+    if args.trace:
+        for l in trace_lines(out, robot, planner):
+            print(f"  {tag}: {l}", flush=True)
+    return result
 
 
 def figures(j: dict) -> dict:
@@ -125,12 +140,21 @@ def main() -> int:
     ap.add_argument("--ag", default=str(ROOT / "results/triangle.ag"))
     ap.add_argument("--out", default=str(ROOT / "results/bridge-profile"))
     ap.add_argument("--only", choices=["tls", "tcp"], help="one transport only")
+    ap.add_argument("--against", metavar="DIR",
+                    help="the binaries of another build (a copy of its agp, agp-physics, agp-estimator, agp-planner): "
+                         "each run of --bin is preceded by the same run of these, so both meet the same conditions, "
+                         "and the medians of both are printed")
+    ap.add_argument("--trace", action="store_true",
+                    help="set AGP_BRIDGE_TRACE for both bridges and print where their hops' time went (over the whole run, "
+                         "the placement and the floors' pause included), after each run")
     ap.add_argument("--env", action="append", default=[], metavar="K=V",
                     help="set for every agp process (both supervisors, so every pipeline process and bridge, and the profiler), e.g. AGP_WAIT=block")
     args = ap.parse_args()
     for kv in args.env:
         k, _, v = kv.partition("=")
         ENV[k] = v
+    if args.trace:
+        ENV["AGP_BRIDGE_TRACE"] = "1"
     bin_dir, out, ag = Path(args.bin).resolve(), Path(args.out).resolve(), Path(args.ag).resolve()
     if not ag.exists():
         sys.exit(f"bench_bridge_profile: no {ag}: run `agp up` once first (it learns the triangle)")
@@ -138,17 +162,23 @@ def main() -> int:
     keys = out / "keys"
     if not keys.exists():
         agp(bin_dir, "bridge", "keygen", str(keys))
-    runs: dict[str, list[dict]] = {"tls": [], "tcp": []}
     transports = [t for t in ["tls", "tcp"] if args.only in (None, t)]
+    builds = [("", bin_dir)]
+    if args.against:
+        builds.insert(0, ("against ", Path(args.against).resolve()))
+    runs: dict[tuple[str, str], list[dict]] = {(b, t): [] for b, _ in builds for t in transports}
     for k in range(args.rounds):
         for tag in transports:
-            f = figures(one_run(bin_dir, out, ag, keys, tag == "tls", k, args))
-            runs[tag].append(f)
-            print(line(tag, f), flush=True)
+            for build, bins in builds:
+                f = figures(one_run(bins, out, ag, keys, tag == "tls", k, args))
+                runs[(build, tag)].append(f)
+                print(build + line(tag, f), flush=True)
     print(f"\nmedians over {args.rounds} rounds ({args.seconds} s sampled, {args.floor_seconds} s per floor){' with ' + ' '.join(args.env) if args.env else ''}:")
-    for tag in transports:
-        med = {key: statistics.median(r[key] for r in runs[tag]) for key in runs[tag][0]}
-        print(line(tag, med) + f"  [load {min(r['load'] for r in runs[tag]):.1f}-{max(r['load'] for r in runs[tag]):.1f}]")
+    for build, bins in builds:
+        for tag in transports:
+            r = runs[(build, tag)]
+            med = {key: statistics.median(x[key] for x in r) for key in r[0]}
+            print(build + line(tag, med) + f"  [load {min(x['load'] for x in r):.1f}-{max(x['load'] for x in r):.1f}] ({bins})")
     return 0
 
 

@@ -10,7 +10,8 @@ Two kinds of checks, each a few milliseconds to a second, none that learns or pl
 - refusals: the error lines the docs quote, run as the docs show them on files made for the
   purpose in a temporary folder (a scenario whose polygon crosses itself, a realtime launch
   file that may learn, a bad `AGP_WAIT`, a launch file with a `remote` that names neither
-  `tls` nor `insecure`), checked for the exit status and the quoted text.
+  `tls` nor `insecure`, a live session detached with no AG file to serve), checked for the
+  exit status and the quoted text.
 
 Exit 0 when every check holds, else 1 naming each. `tools/readme_commands.py` runs it with its
 `--bin` folder, so CI runs it.
@@ -133,6 +134,7 @@ def check(bin_dir: Path, verbose: bool = False) -> tuple[int, list[str]]:
         (t / "realtime-learn.toml").write_text(REALTIME_LEARN.replace("INSTANCE", instance))
         (t / "remote-neither.toml").write_text(REMOTE_NEITHER.replace("INSTANCE", instance))
         (t / "launch.toml").write_text((ROOT / "launch.toml").read_text().replace('instance = "default"', f'instance = "{instance}"'))
+        (t / "launch-live.toml").write_text((ROOT / "launch-live.toml").read_text().replace('instance = "live"', f'instance = "{instance}"'))
         agp = str(bin_dir / "agp")
         env_path = {"PATH": f"{bin_dir}:{os.environ.get('PATH', '')}"}
         checks = [
@@ -146,6 +148,10 @@ def check(bin_dir: Path, verbose: bool = False) -> tuple[int, list[str]]:
               "without it (the clock is `realtime`)", "agp: nothing was started"]),
             # README, Speed and latency: `agp up` refuses an AGP_WAIT that names no strategy.
             ([agp, "up", "launch.toml"], {**env_path, "AGP_WAIT": "sometimes"}, 2, ["AGP_WAIT"]),
+            # README, Faults: `agp up --detach` whose planner fails in its first 2 s (no AG file
+            # to serve) stops the run, prints its error line and exits 1.
+            ([agp, "up", "launch-live.toml", "--detach"], {}, 1,
+             ["agp-planner: error: no AG file at", "failed at start-up", "the run was stopped"]),
             # RELIABILITY 14: a remote with neither tls nor insecure is refused on its line.
             ([agp, "up", "remote-neither.toml"], env_path, 2, ["remote-neither.toml:11"]),
         ]

@@ -255,6 +255,7 @@ fn a_live_session_across_a_cut_link_stops_the_robot_by_the_watchdog_moves_it_not
     });
     let cut_ns = monotonic_ns();
     proxy.cut();
+    let cut_done_ns = monotonic_ns();
     std::thread::sleep(LIVE_CUT);
     proxy.restore();
     let restored_ns = monotonic_ns();
@@ -281,6 +282,15 @@ fn a_live_session_across_a_cut_link_stops_the_robot_by_the_watchdog_moves_it_not
     // way) until the link was back; the watchdog stopped the wheels; from one watchdog
     // period after that on, the robot did not move.
     assert!(stop.last_command_ns <= cut_ns + IN_FLIGHT_NS, "{all}");
+    // The last command answered a frame physics published before the link was cut (one
+    // on its way), and the wheels turned on it one watchdog period of physics's ticks at
+    // most: physics refuses a command whose frame is older, and stops the wheels in the
+    // tick one period after the last one it applied.
+    assert!(
+        stop.last_frame_ns != 0 && stop.last_frame_ns <= cut_done_ns,
+        "{all}"
+    );
+    assert_eq!(stop.stopped_late(), Some(false), "{all}");
     let resumed = stop.resumed_ns.expect("a command ended the stop");
     assert!(
         resumed >= restored_ns,
@@ -297,7 +307,7 @@ fn a_live_session_across_a_cut_link_stops_the_robot_by_the_watchdog_moves_it_not
     assert_eq!(end_b.status.code(), Some(0), "{all}");
     assert_eq!(end_a.status.code(), Some(0), "{all}");
     assert!(
-        end_a.stdout.contains("watchdog (250 ms): "),
+        end_a.stdout.contains("watchdog (250 ms, 160 ticks): "),
         "physics's summary: {all}"
     );
     assert_eq!(count_instance_files(&a), 0, "files of `{a}` remain");

@@ -8,10 +8,17 @@
 //!   key for that direction. It waits on the listeners of those topics' event services (a
 //!   `ppoll` on their sockets with a deadline), never on a sleep. It keeps the latched state
 //!   ([`Latch`]) and sends it when a far end says hello, before any live message.
-//! - *in* (the far instance to this one): takes the link's messages in the order they were
-//!   put (one key, one publisher, reliable, congestion control `Block`: nothing is dropped
-//!   or reordered), checks each header, writes the bytes once into a loaned sample and
-//!   notifies the topic's event service.
+//! - *in* (the far instance to this one): the link's messages are taken in Zenoh's receive
+//!   callback, in the order they were put (one key, one publisher, reliable, congestion
+//!   control `Block`: nothing is dropped or reordered; Zenoh calls one subscriber's callback
+//!   for one link's messages one after the other): it checks each header, writes the bytes
+//!   once into a loaned sample and notifies the topic's event service, on the thread that
+//!   read them off the socket. The in thread itself only says hello, hears the far end's
+//!   welcome and `bye`, and watches the far end and this instance.
+//!
+//! So a bridged hop wakes two threads besides Zenoh's own: the out thread at the sending
+//! end (on the iceoryx2 event) and the reader at the far end (physics, the planner). With
+//! `AGP_BRIDGE_TRACE` set, each end says where the hops' time went ([`crate::trace`]).
 //!
 //! The far end may go and come back (a link cut, its bridge restarted): the in thread watches
 //! the Zenoh peers of the session. When the far peer is lost or replaced, this end says hello
@@ -46,6 +53,7 @@ use crate::endpoint::Endpoint;
 use crate::ports::{Auth, InPort, OutPort, Restamp, in_port, out_port};
 use crate::route::{BRIDGED_TOPICS, BridgedTopic, Latch, Side};
 use crate::tls::TlsKeys;
+use crate::trace::{Point, Trace};
 use crate::wire::{self, Header, WireDecodeError};
 
 /// How a bridge runs.
@@ -71,8 +79,9 @@ pub struct BridgeConfig {
     pub key: Option<SessionKey>,
     /// Prefix of the bridge's two iceoryx2 node names (`<prefix>-out`, `<prefix>-in`).
     pub node_name: String,
-    /// How both threads wait for the next message (`agp bridge` gives `block` unless
-    /// [`crate::BRIDGE_WAIT_ENV`] or `--wait` says otherwise).
+    /// How the out thread waits for the next message to send (`agp bridge` gives `block`
+    /// unless [`crate::BRIDGE_WAIT_ENV`] or `--wait` says otherwise); the far end's messages are
+    /// taken in Zenoh's receive callback, which waits for nothing.
     pub wait: WaitStrategy,
     /// How long the far end may be gone (no peer on the link) once it had joined before
     /// this end gives up ([`BridgeEnd::FarGone`]); a cut or a restart of the far bridge
@@ -141,8 +150,8 @@ pub enum BridgeError {
 
 /// Longest single block of the out thread, so a hello or a stop is seen within it.
 const OUT_SLICE: Duration = Duration::from_millis(20);
-/// Longest single wait of the in thread.
-const IN_SLICE: Duration = Duration::from_millis(20);
+/// Longest single wait of the in thread (and of the floor's ping end).
+pub(crate) const IN_SLICE: Duration = Duration::from_millis(20);
 /// How often a receiving end repeats its hello until it is welcomed.
 const HELLO_EVERY: Duration = Duration::from_millis(100);
 /// How long a stopping end waits for a far end to be there to hear its `bye` (under a
@@ -155,8 +164,6 @@ const INSTANCE_CHECK_EVERY: Duration = Duration::from_millis(250);
 /// How often the in thread's publishers hand their history to new subscribers (physics and
 /// the estimator do it as often while they wait).
 const UPDATE_CONNECTIONS_EVERY: Duration = Duration::from_millis(20);
-/// Samples from the far end waiting for the in thread (a whole grid set and then some).
-const IN_QUEUE: usize = 1024;
 /// Unlatched messages (commands, resets, events) this side sent before the far end joined,
 /// kept for it: a planner that has its grids and first frame may command step 1 before the
 /// far end's hello has come back, and in lockstep a lost command stops the run. Past this
@@ -387,8 +394,10 @@ fn out_loop(
     };
     let mut far_lost_seen = 0;
     let mut last_activity = Instant::now();
+    let mut trace = Trace::from_env();
     loop {
         if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
+            trace.report(&format!("{} side, sending", config.side.name()));
             if shared.far_over.load(Ordering::SeqCst) {
                 return Ok(());
             }
@@ -423,7 +432,15 @@ fn out_loop(
         if let Some(epochs) = &epochs {
             take_active_epoch(epochs, &mut state.active, shared);
         }
-        let moved = forward_outgoing(&mut outgoing, &mut state, &epochs, config, shared, &put)?;
+        let moved = forward_outgoing(
+            &mut outgoing,
+            &mut state,
+            &epochs,
+            config,
+            shared,
+            &put,
+            &mut trace,
+        )?;
         if moved > 0 {
             last_activity = Instant::now();
             continue;
@@ -525,6 +542,7 @@ fn forward_outgoing(
     config: &BridgeConfig,
     shared: &Shared,
     put: &Put<'_>,
+    trace: &mut Trace,
 ) -> Result<usize, BridgeError> {
     let (side, key) = (config.side, config.key);
     let OutState {
@@ -570,8 +588,10 @@ fn forward_outgoing(
                 l.extend_from_slice(bytes);
             }
             if *live {
+                trace.mark(topic.service, bytes, Point::Woke);
                 match put(bytes, header) {
                     Ok(()) => {
+                        trace.mark(topic.service, bytes, Point::Put);
                         shared.sent[slot].fetch_add(1, Ordering::Relaxed);
                     }
                     Err(e) => failed = Some(e),
@@ -683,6 +703,10 @@ fn open_out(
 /// Waits for a notification on any listener, as `strategy` says: polling with yields for
 /// its spin (counted from the last message), then blocking in `ppoll` on the listeners'
 /// sockets for at most [`OUT_SLICE`]. A notification found pending returns at once.
+///
+/// Only the listeners `ppoll` found readable are read (one `recv` each, and one that says
+/// there is no more): a wake-up costs the poll and those, not two reads of every listener
+/// (the sending end of each bridged hop passes here once).
 fn wait_for_any(
     listeners: &[Listener<AgpIpc>],
     fds: &[RawFd],
@@ -705,13 +729,6 @@ fn wait_for_any(
         WaitStrategy::Block | WaitStrategy::SpinThenBlock { .. } => true,
     };
     if !block {
-        return;
-    }
-    let mut pending = 0;
-    for l in listeners {
-        pending += l.try_wait(|_| {}).unwrap_or(0);
-    }
-    if pending > 0 {
         return;
     }
     let mut polled: [libc::pollfd; BRIDGED_TOPICS.len()] = [libc::pollfd {
@@ -738,50 +755,13 @@ fn wait_for_any(
         )
     };
     if woken > 0 {
-        for l in listeners {
-            let _ = l.try_wait(|_| {});
+        for (l, p) in listeners.iter().zip(&polled) {
+            if p.revents != 0 {
+                let _ = l.try_wait(|_| {});
+            }
         }
     }
 }
-
-/// The next message from the far end, waiting as `strategy` says: polling (with a yield
-/// between polls) while the last message is newer than its spin, then blocking for at most
-/// [`IN_SLICE`]. `Ok(None)` when none came.
-pub(crate) fn next_sample(
-    subscriber: &InSubscriber,
-    strategy: WaitStrategy,
-    idle: Duration,
-) -> zenoh::Result<Option<zenoh::sample::Sample>> {
-    let spin = match strategy {
-        WaitStrategy::Spin | WaitStrategy::Yield => IN_SLICE,
-        WaitStrategy::SpinThenBlock { spin } => spin.saturating_sub(idle),
-        WaitStrategy::Block => Duration::ZERO,
-    };
-    if !spin.is_zero() {
-        let until = Instant::now() + spin;
-        loop {
-            if let Some(s) = subscriber.try_recv()? {
-                return Ok(Some(s));
-            }
-            if Instant::now() >= until {
-                break;
-            }
-            if matches!(strategy, WaitStrategy::Spin) {
-                core::hint::spin_loop();
-            } else {
-                std::thread::yield_now();
-            }
-        }
-        if !matches!(strategy, WaitStrategy::SpinThenBlock { .. }) {
-            return Ok(None);
-        }
-    }
-    subscriber.recv_timeout(IN_SLICE)
-}
-
-/// The far end's messages to this end, as they come.
-pub(crate) type InSubscriber =
-    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// This end's hello to the far end: said every [`HELLO_EVERY`] until a welcome names its
 /// nonce, and again under a new nonce when the far end was lost or replaced.
@@ -894,21 +874,142 @@ impl FarPeer {
     }
 }
 
+/// What the in side's Zenoh callback hands the in thread: the far end's replies to this
+/// end's hello, and its `bye`. Its data never goes through the thread.
+enum Control {
+    Welcome(u64),
+    Bye,
+}
+
+/// The in side's iceoryx2 ports (a publisher and a notifier per topic the far end sends),
+/// with the node they were opened on and the trace of what they republished.
+struct Receiving {
+    /// Declared before the node: dropped first.
+    incoming: Vec<(usize, Box<dyn InPort>)>,
+    trace: Trace,
+    _node: iceoryx2::prelude::Node<AgpIpc>,
+}
+
+// SAFETY: `Receiving` is not `Send` only because the iceoryx2 ports and node of `AgpIpc`
+// share their state through `PooledRc` (a non-atomic reference count, like `Rc`). Every
+// clone of those counts is held inside this one value: its ports were opened on its own
+// node, and nothing else of the bridge holds any of them (the out thread has its own node;
+// the `Instance` holds only configuration). A `Receiving` is only ever reached through the
+// `Mutex` of [`Republisher::ports`], so no two threads touch any of those counts, or the
+// ports, at once, and the mutex orders each thread's use after the previous one's: the
+// counts are never raced. `PooledRc` takes and gives its blocks from the calling thread's
+// pool; a block given back on another thread than the one it came from joins that
+// thread's pool, which is ordinary heap memory either way. iceoryx2's thread-safe service
+// type does the same behind a mutex of its own.
+unsafe impl Send for Receiving {}
+
+/// The far end's messages, republished in this instance from Zenoh's receive callback: the
+/// thread that read them off the link writes them into shared memory and wakes their
+/// readers, with no hand-off to another thread on the way (one wake-up less per hop).
+struct Republisher {
+    /// `None` once the in thread took them back to close them.
+    ports: std::sync::Mutex<Option<Receiving>>,
+    carried: Vec<BridgedTopic>,
+    /// For each carried topic, its index in `Receiving::incoming` (`None`: this side sends it).
+    index_of: Vec<Option<usize>>,
+    side: Side,
+    /// Robot side: the epoch and token every command and reset is republished with.
+    robot_stamp: Restamp,
+    shared: Arc<Shared>,
+    control: std::sync::mpsc::Sender<Control>,
+    /// The first error the callback met; the bridge ends with it.
+    failed: std::sync::Mutex<Option<BridgeError>>,
+}
+
+impl Republisher {
+    /// Zenoh's receive callback: republishes one message of the far end, or hands a control
+    /// message to the in thread. An error stops the bridge (it is kept for the in thread).
+    fn take(&self, sample: &zenoh::sample::Sample) {
+        if self.shared.stop.load(Ordering::Relaxed) {
+            return;
+        }
+        if let Err(e) = self.republish(sample) {
+            let mut failed = self.failed.lock().unwrap_or_else(|p| p.into_inner());
+            failed.get_or_insert(e);
+            self.shared.stop.store(true, Ordering::SeqCst);
+        }
+    }
+
+    fn republish(&self, sample: &zenoh::sample::Sample) -> Result<(), BridgeError> {
+        let text = sample
+            .attachment()
+            .map(|a| a.to_bytes())
+            .unwrap_or_default();
+        match wire::decode(&text)? {
+            Header::Data { service, type_name } => {
+                let payload = sample.payload().to_bytes();
+                let at =
+                    wire::check_data(&self.carried, self.side, service, type_name, payload.len())?;
+                let Some(i) = self.index_of[at] else {
+                    return Ok(());
+                };
+                let restamp = match self.side {
+                    Side::Robot => self.robot_stamp,
+                    Side::Planner => Restamp {
+                        epoch: self.shared.active_epoch.load(Ordering::Relaxed),
+                        token: 0,
+                    },
+                };
+                let mut ports = self.ports.lock().unwrap_or_else(|p| p.into_inner());
+                let Some(r) = ports.as_mut() else {
+                    return Ok(());
+                };
+                r.trace.mark(service, &payload, Point::Arrived);
+                let (s, port) = &mut r.incoming[i];
+                port.publish(&payload, restamp)
+                    .map_err(|detail| BridgeError::Forward {
+                        topic: self.carried[at].name,
+                        detail,
+                    })?;
+                self.shared.received[*s].fetch_add(1, Ordering::Relaxed);
+                r.trace.mark(service, &payload, Point::Republished);
+            }
+            Header::Welcome { nonce } => {
+                let _ = self.control.send(Control::Welcome(nonce));
+            }
+            Header::Bye => {
+                let _ = self.control.send(Control::Bye);
+            }
+            Header::Hello { .. } => {}
+        }
+        Ok(())
+    }
+
+    /// Hands the latched topics' history to readers that came since.
+    fn update_connections(&self, latched: &[bool; BRIDGED_TOPICS.len()]) {
+        let ports = self.ports.lock().unwrap_or_else(|p| p.into_inner());
+        for (s, port) in ports.iter().flat_map(|r| &r.incoming) {
+            if latched[*s] {
+                port.update_connections();
+            }
+        }
+    }
+}
+
+/// The in side: opens this end's publishers of what the far end sends and hands them to
+/// Zenoh's receive callback ([`Republisher`]); this thread says hello, watches the far end
+/// and this instance, and ends the bridge. At its end the callback is undeclared and the
+/// ports are closed here, on the thread that opened them.
 fn in_loop(
     instance: &Instance,
     config: &BridgeConfig,
     session: &zenoh::Session,
-    shared: &Shared,
+    shared: &Arc<Shared>,
     on_ready: impl FnOnce(),
 ) -> Result<BridgeEnd, BridgeError> {
-    let _node = instance
+    let node = instance
         .node(&format!("{}-in", config.node_name), false)
         .map_err(|e| BridgeError::Node(format!("{e:?}")))?;
     let mut incoming: Vec<(usize, Box<dyn InPort>)> = Vec::new();
     let mut carried = Vec::new();
     for topic in &config.topics {
         if topic.from != config.side {
-            let port = in_port(instance, &_node, topic).map_err(|detail| BridgeError::Open {
+            let port = in_port(instance, &node, topic).map_err(|detail| BridgeError::Open {
                 topic: topic.name,
                 detail,
             })?;
@@ -924,14 +1025,81 @@ fn in_loop(
         .iter()
         .map(|t| incoming.iter().position(|(s, _)| *s == slot(t)))
         .collect();
-    let side = config.side;
-    let subscriber = session
-        .declare_subscriber(direction_key(&config.link, side))
-        .with(zenoh::handlers::FifoChannel::new(IN_QUEUE))
-        .wait()
-        .map_err(zenoh_err)?;
+    let (control, controls) = std::sync::mpsc::channel();
+    let republisher = Arc::new(Republisher {
+        ports: std::sync::Mutex::new(Some(Receiving {
+            incoming,
+            trace: Trace::from_env(),
+            _node: node,
+        })),
+        carried,
+        index_of,
+        side: config.side,
+        robot_stamp: Restamp {
+            epoch: config.epoch,
+            token: config.token,
+        },
+        shared: Arc::clone(shared),
+        control,
+        failed: std::sync::Mutex::new(None),
+    });
+    let subscriber = {
+        let r = Arc::clone(&republisher);
+        session
+            .declare_subscriber(direction_key(&config.link, config.side))
+            .callback(move |sample| r.take(&sample))
+            .wait()
+            .map_err(zenoh_err)?
+    };
+    let end = watch_link(
+        instance,
+        config,
+        session,
+        shared,
+        &republisher,
+        &controls,
+        &latched,
+        on_ready,
+    );
+    // No callback runs after the undeclaration; one under way holds the ports' lock, so
+    // taking them waits for it.
+    let _ = subscriber.undeclare().wait();
+    let receiving = republisher
+        .ports
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take();
+    if let Some(mut r) = receiving {
+        r.trace
+            .report(&format!("{} side, receiving", config.side.name()));
+    }
+    let failed = republisher
+        .failed
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take();
+    match failed {
+        Some(e) => Err(e),
+        None => end,
+    }
+}
+
+/// The in thread's loop: hellos until welcomed, the far end's comings and goings, this
+/// instance's supervisor, the latched topics' late readers; ends on the far end's `bye`,
+/// a stop, or the far end gone too long.
+#[allow(clippy::too_many_arguments)]
+fn watch_link(
+    instance: &Instance,
+    config: &BridgeConfig,
+    session: &zenoh::Session,
+    shared: &Shared,
+    republisher: &Republisher,
+    controls: &std::sync::mpsc::Receiver<Control>,
+    latched: &[bool; BRIDGED_TOPICS.len()],
+    on_ready: impl FnOnce(),
+) -> Result<BridgeEnd, BridgeError> {
     let hello_pub = session
-        .declare_publisher(hello_key(&config.link, side))
+        .declare_publisher(hello_key(&config.link, config.side))
         .congestion_control(CongestionControl::Block)
         .wait()
         .map_err(zenoh_err)?;
@@ -941,7 +1109,6 @@ fn in_loop(
     let mut last_update = Instant::now();
     let mut far = FarPeer::default();
     let mut last_peers = Instant::now();
-    let mut last_sample = Instant::now();
     loop {
         if shared.stop.load(Ordering::SeqCst) || shutdown_requested() {
             return Ok(BridgeEnd::Stopped);
@@ -960,54 +1127,20 @@ fn in_loop(
         }
         greeting.say(&hello_pub)?;
         if last_update.elapsed() >= UPDATE_CONNECTIONS_EVERY {
-            // Only the latched topics keep a history to hand over.
-            for (s, port) in &incoming {
-                if latched[*s] {
-                    port.update_connections();
-                }
-            }
+            republisher.update_connections(latched);
             last_update = Instant::now();
         }
-        let sample = match next_sample(&subscriber, config.wait, last_sample.elapsed()) {
-            Ok(Some(s)) => s,
-            Ok(None) => continue,
-            Err(e) => return Err(zenoh_err(e)),
-        };
-        last_sample = Instant::now();
-        let text = sample
-            .attachment()
-            .map(|a| a.to_bytes())
-            .unwrap_or_default();
-        match wire::decode(&text)? {
-            Header::Data { service, type_name } => {
-                let payload = sample.payload().to_bytes();
-                let at = wire::check_data(&carried, side, service, type_name, payload.len())?;
-                let Some(i) = index_of[at] else {
-                    continue;
-                };
-                let restamp = match side {
-                    Side::Robot => Restamp {
-                        epoch: config.epoch,
-                        token: config.token,
-                    },
-                    Side::Planner => Restamp {
-                        epoch: shared.active_epoch.load(Ordering::Relaxed),
-                        token: 0,
-                    },
-                };
-                let (s, port) = &mut incoming[i];
-                port.publish(&payload, restamp)
-                    .map_err(|detail| BridgeError::Forward {
-                        topic: carried[at].name,
-                        detail,
-                    })?;
-                shared.received[*s].fetch_add(1, Ordering::Relaxed);
-            }
-            Header::Welcome { nonce: n } if n == greeting.nonce => greeting.welcomed = true,
-            Header::Welcome { .. } | Header::Hello { .. } => {}
-            Header::Bye => {
+        match controls.recv_timeout(IN_SLICE) {
+            Ok(Control::Welcome(n)) if n == greeting.nonce => greeting.welcomed = true,
+            Ok(Control::Welcome(_)) | Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Ok(Control::Bye) => {
                 shared.far_over.store(true, Ordering::SeqCst);
                 return Ok(BridgeEnd::FarEnded);
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(BridgeError::Zenoh(
+                    "the link's receive callback is gone".to_owned(),
+                ));
             }
         }
     }

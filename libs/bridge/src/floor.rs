@@ -4,10 +4,13 @@
 //!
 //! The pong end listens and echoes each sample from the ping key onto the pong key; the ping
 //! end connects, sends one sample at a time, stamped, and times its round trip. A one-way
-//! figure is half a round trip. Both ends wait for a sample as a bridge's receiving end does,
-//! with the strategy they are given (the bridge's, [`crate::BRIDGE_WAIT_ENV`]: by default
-//! blocking).
+//! figure is half a round trip. The pong end answers in Zenoh's receive callback, as a
+//! bridge's receiving end republishes there; the ping end waits for each answer as a
+//! bridge's sending end waits for its next message, with the strategy it is given (the
+//! bridge's, [`crate::BRIDGE_WAIT_ENV`]: by default blocking).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use zenoh::Wait;
@@ -15,7 +18,7 @@ use zenoh::qos::CongestionControl;
 
 use agp_runtime::WaitStrategy;
 
-use crate::bridge::next_sample;
+use crate::bridge::IN_SLICE;
 use crate::endpoint::Endpoint;
 use crate::tls::TlsKeys;
 
@@ -66,12 +69,14 @@ pub struct FloorFigures {
     pub max_ns: u64,
 }
 
-/// Echoes pings until `stop` says so (checked between samples, at least every 20 ms),
-/// waiting for each as `wait` says.
+/// Echoes pings until `stop` says so (checked every 20 ms) or the ping end says it is done.
+/// Each ping is answered in Zenoh's receive callback, as a bridge's receiving end
+/// republishes a message there (and as Zenoh's own `z_pong` answers): the floor's one-way
+/// figure then holds one wake-up of a waiting thread (the ping end's, half of it per way),
+/// where a bridged hop holds two (its out thread's and its reader's).
 pub fn floor_pong(
     endpoint: &Endpoint,
     tls: Option<&TlsKeys>,
-    wait: WaitStrategy,
     stop: impl Fn() -> bool,
 ) -> Result<(), FloorError> {
     let session = open(endpoint, tls)?;
@@ -81,28 +86,35 @@ pub fn floor_pong(
         .express(true)
         .wait()
         .map_err(zerr)?;
-    let pings = session
-        .declare_subscriber(PING_KEY)
-        .with(zenoh::handlers::FifoChannel::new(64))
-        .wait()
-        .map_err(zerr)?;
-    let mut last = Instant::now();
-    while !stop() {
-        match next_sample(&pings, wait, last.elapsed()) {
-            Ok(Some(sample)) => {
-                last = Instant::now();
-                let bytes = sample.payload().to_bytes();
-                if bytes.is_empty() {
-                    break;
+    let done = Arc::new(AtomicBool::new(false));
+    let failed: Arc<Mutex<Option<String>>> = Arc::default();
+    let pings = {
+        let (done, failed) = (Arc::clone(&done), Arc::clone(&failed));
+        session
+            .declare_subscriber(PING_KEY)
+            .callback(move |sample| {
+                if sample.payload().is_empty() {
+                    done.store(true, Ordering::SeqCst);
+                } else if let Err(e) = publisher.put(sample.payload().clone()).wait() {
+                    failed
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .get_or_insert(e.to_string());
+                    done.store(true, Ordering::SeqCst);
                 }
-                publisher.put(bytes.to_vec()).wait().map_err(zerr)?;
-            }
-            Ok(None) => {}
-            Err(e) => return Err(zerr(e)),
-        }
+            })
+            .wait()
+            .map_err(zerr)?
+    };
+    while !stop() && !done.load(Ordering::SeqCst) {
+        std::thread::sleep(IN_SLICE);
     }
+    let _ = pings.undeclare().wait();
     let _ = session.close().wait();
-    Ok(())
+    match failed.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        Some(e) => Err(FloorError::Zenoh(e)),
+        None => Ok(()),
+    }
 }
 
 /// Pings the pong end at `endpoint` for `seconds` of timed round trips of `size`-byte
@@ -195,3 +207,42 @@ pub fn floor_ping(
         one_way_ns: one_way,
     })
 }
+
+/// The next answer of the pong end, waiting as `strategy` says: polling (with a yield
+/// between polls) while the last message is newer than its spin, then blocking for at most
+/// [`IN_SLICE`]. `Ok(None)` when none came.
+fn next_sample(
+    subscriber: &InSubscriber,
+    strategy: WaitStrategy,
+    idle: Duration,
+) -> zenoh::Result<Option<zenoh::sample::Sample>> {
+    let spin = match strategy {
+        WaitStrategy::Spin | WaitStrategy::Yield => IN_SLICE,
+        WaitStrategy::SpinThenBlock { spin } => spin.saturating_sub(idle),
+        WaitStrategy::Block => Duration::ZERO,
+    };
+    if !spin.is_zero() {
+        let until = Instant::now() + spin;
+        loop {
+            if let Some(s) = subscriber.try_recv()? {
+                return Ok(Some(s));
+            }
+            if Instant::now() >= until {
+                break;
+            }
+            if matches!(strategy, WaitStrategy::Spin) {
+                core::hint::spin_loop();
+            } else {
+                std::thread::yield_now();
+            }
+        }
+        if !matches!(strategy, WaitStrategy::SpinThenBlock { .. }) {
+            return Ok(None);
+        }
+    }
+    subscriber.recv_timeout(IN_SLICE)
+}
+
+/// The pong end's answers, as they come.
+type InSubscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;

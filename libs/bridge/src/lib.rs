@@ -20,6 +20,8 @@ mod keygen;
 mod ports;
 mod route;
 pub mod tls;
+#[cfg(feature = "link")]
+pub mod trace;
 pub mod wire;
 
 #[cfg(feature = "link")]
@@ -36,6 +38,8 @@ pub use route::{
     parse_topics,
 };
 pub use tls::{TlsError, TlsKeys};
+#[cfg(feature = "link")]
+pub use trace::TRACE_ENV;
 
 /// The environment variable that says how a bridge's threads wait (`BridgeConfig::wait`,
 /// `agp bridge --wait`), named as `AGP_WAIT` names a strategy; `block` when unset. Not

@@ -111,6 +111,10 @@ pub struct PushPlan {
     /// [`PushChoiceSettings::spread_weight`]); compare with [`PushPlanner::cost`] of the
     /// present one.
     pub cost: f64,
+    /// Along a path ([`PushPlanner::plan_along`]): the predicted centroid track's mean
+    /// distance to the path (offset as asked), m, sampled at a quarter, half, three
+    /// quarters and the end of the push; 0 elsewhere.
+    pub track_m: f64,
     /// Where the robot starts the push and the heading it drives at, world frame.
     pub start: Pose2,
 }
@@ -332,6 +336,7 @@ impl<'a> PushPlanner<'a> {
                         uncorrected_rotation_rad: scaled.rotation_rad,
                         predicted,
                         cost,
+                        track_m: 0.0,
                         start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
                     });
                 }
@@ -452,10 +457,7 @@ impl PushPlanner<'_> {
     /// [`PushPlanner::score`] weighs them) and, when the heading is asked for, the end
     /// heading's error beyond its tolerance. `None` if the AG predicts nothing anywhere.
     pub fn plan_along(&self, estimate: Pose2, follow: &PathFollowing<'_>) -> Option<PushPlan> {
-        let s = &self.settings;
-        let c0 = DVec2::new(estimate.x, estimate.y);
-        let (s0, _) = path_projection(follow.path, c0);
-        let rot = DVec2::from_angle(estimate.theta);
+        let (s0, _) = path_projection(follow.path, DVec2::new(estimate.x, estimate.y));
         let mut best: Option<PushPlan> = None;
         let width = self.alphas.len().max(1);
         let predictions = self.predictions.chunks_exact(width);
@@ -465,75 +467,179 @@ impl PushPlanner<'_> {
                 let Some(p) = *p else {
                     continue;
                 };
-                if p.confidence < s.min_confidence {
+                if p.confidence < self.settings.min_confidence {
                     continue;
                 }
                 for &f in follow.push_fractions {
-                    let scale = (f + s.fraction_offset) / (1.0 + s.fraction_offset);
-                    // The sideways part of a short push, corrected (see `cross_gain`).
-                    let cross = match heading {
-                        Some(u) if f < 1.0 => across(p.displacement * scale, *u),
-                        _ => DVec2::ZERO,
-                    };
-                    let displacement = p.displacement * scale + (follow.cross_gain - 1.0) * cross;
-                    let moved = rot.rotate(displacement);
-                    let c1 = c0 + moved;
-                    let mut track = 0.0;
-                    for k in 1..=4 {
-                        let at = c0 + moved * (f64::from(k) / 4.0);
-                        track += (path_offset(follow.path, at).1 - follow.offset_m).abs();
-                    }
-                    let (s1, d1) = path_offset(follow.path, c1);
-                    let d1 = (d1 - follow.offset_m).abs();
-                    let turn = if f < 1.0 { follow.turn_gain } else { 1.0 };
-                    let rotation = p.rotation_rad * scale * turn;
-                    let risk = s.spread_weight
-                        * scale
-                        * (p.displacement_spread_m + s.spread_lever_m * p.rotation_spread_rad);
-                    let heading = follow.heading_tolerance_rad.map_or(0.0, |tolerance| {
-                        let want = path_direction_at(follow.path, s1);
-                        let off = symmetric_angle_error(
-                            estimate.theta + rotation - want,
-                            s.symmetry_order,
-                        )
-                        .abs();
-                        follow.heading_weight_m_per_rad * (off - tolerance).max(0.0)
-                    });
-                    let cost = follow.track_weight * track / 4.0
-                        + d1
-                        + follow.cross_doubt * cross.length()
-                        + follow.progress_weight * (s1 - s0 - follow.advance_m).abs()
-                        + risk
-                        + s.reach_rotation_weight_m_per_rad * rotation.abs()
-                        + heading;
-                    if best.is_some_and(|b| b.cost <= cost) {
+                    let scored = self.score_along(estimate, follow, s0, &p, *heading, f);
+                    if best.is_some_and(|b| b.cost <= scored.cost) {
                         continue;
                     }
-                    let Some((start, h)) = approach_start(c, alpha, s.start_radius_m) else {
-                        continue;
-                    };
-                    let sw = c0 + rot.rotate(start);
-                    let scaled = Prediction {
-                        displacement,
-                        rotation_rad: rotation,
-                        ..p
-                    };
-                    best = Some(PushPlan {
-                        contact_obj: c,
-                        alpha_deg: alpha,
-                        fraction: f,
-                        prediction: scaled,
-                        uncorrected_cross: cross,
-                        uncorrected_rotation_rad: p.rotation_rad * scale,
-                        predicted: scaled.apply_to(estimate),
-                        cost,
-                        start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
-                    });
+                    if let Some(plan) = self.plan_of(estimate, c, alpha, f, &p, scored) {
+                        best = Some(plan);
+                    }
                 }
             }
         }
         best
     }
+
+    /// The push through the centroid (alpha 0, or the learned alpha nearest it) heading
+    /// most nearly along `toward` (world frame), `fraction` of the learned push long: the
+    /// push the baseline planner makes, scored as [`PushPlanner::plan_along`] scores its
+    /// candidates (the contact is the candidate whose ray from the centroid points most
+    /// nearly against `toward`, within half the candidates' spacing). `None` if the AG
+    /// predicts that push with too little confidence, or no start reaches it.
+    pub fn plan_along_centroid_push(
+        &self,
+        estimate: Pose2,
+        follow: &PathFollowing<'_>,
+        toward: DVec2,
+        fraction: f64,
+    ) -> Option<PushPlan> {
+        if toward.length_squared() <= 0.0 || self.alphas.is_empty() {
+            return None;
+        }
+        // The push heads from the contact to the centroid: the contact is behind it.
+        let back = DVec2::from_angle(-estimate.theta)
+            .rotate(-toward)
+            .normalize();
+        let (i, _) = self
+            .contacts
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.length_squared() > 0.0)
+            .map(|(i, c)| (i, c.normalize().dot(back)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))?;
+        let (j, _) = self
+            .alphas
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+        let k = i * self.alphas.len() + j;
+        let p = self.predictions.get(k).copied().flatten()?;
+        if p.confidence < self.settings.min_confidence {
+            return None;
+        }
+        let heading = self.headings.get(k).copied().flatten();
+        let (s0, _) = path_projection(follow.path, DVec2::new(estimate.x, estimate.y));
+        let scored = self.score_along(estimate, follow, s0, &p, heading, fraction);
+        self.plan_of(
+            estimate,
+            self.contacts[i],
+            self.alphas[j],
+            fraction,
+            &p,
+            scored,
+        )
+    }
+
+    /// The cost of one candidate push along `follow.path` (see [`PushPlanner::plan_along`])
+    /// whose full-length prediction is `p`, its heading `heading` (object frame, unit),
+    /// `f` of the learned push long, from `estimate` at arc length `s0` of the path.
+    fn score_along(
+        &self,
+        estimate: Pose2,
+        follow: &PathFollowing<'_>,
+        s0: f64,
+        p: &Prediction,
+        heading: Option<DVec2>,
+        f: f64,
+    ) -> AlongScore {
+        let s = &self.settings;
+        let c0 = DVec2::new(estimate.x, estimate.y);
+        let rot = DVec2::from_angle(estimate.theta);
+        let scale = (f + s.fraction_offset) / (1.0 + s.fraction_offset);
+        // The sideways part of a short push, corrected (see `cross_gain`).
+        let cross = match heading {
+            Some(u) if f < 1.0 => across(p.displacement * scale, u),
+            _ => DVec2::ZERO,
+        };
+        let displacement = p.displacement * scale + (follow.cross_gain - 1.0) * cross;
+        let moved = rot.rotate(displacement);
+        let c1 = c0 + moved;
+        let mut track = 0.0;
+        for k in 1..=4 {
+            let at = c0 + moved * (f64::from(k) / 4.0);
+            track += (path_offset(follow.path, at).1 - follow.offset_m).abs();
+        }
+        let (s1, d1) = path_offset(follow.path, c1);
+        let d1 = (d1 - follow.offset_m).abs();
+        let turn = if f < 1.0 { follow.turn_gain } else { 1.0 };
+        let rotation = p.rotation_rad * scale * turn;
+        let risk = s.spread_weight
+            * scale
+            * (p.displacement_spread_m + s.spread_lever_m * p.rotation_spread_rad);
+        let heading_cost = follow.heading_tolerance_rad.map_or(0.0, |tolerance| {
+            let want = path_direction_at(follow.path, s1);
+            let off =
+                symmetric_angle_error(estimate.theta + rotation - want, s.symmetry_order).abs();
+            follow.heading_weight_m_per_rad * (off - tolerance).max(0.0)
+        });
+        let cost = follow.track_weight * track / 4.0
+            + d1
+            + follow.cross_doubt * cross.length()
+            + follow.progress_weight * (s1 - s0 - follow.advance_m).abs()
+            + risk
+            + s.reach_rotation_weight_m_per_rad * rotation.abs()
+            + heading_cost;
+        AlongScore {
+            cost,
+            track_m: track / 4.0,
+            displacement,
+            rotation,
+            cross,
+            uncorrected_rotation: p.rotation_rad * scale,
+        }
+    }
+
+    /// The plan of a scored candidate push at `contact` (object frame) and `alpha`, `f`
+    /// of the learned push long, whose full-length prediction is `p`; `None` if no start
+    /// on the circle reaches the contact.
+    fn plan_of(
+        &self,
+        estimate: Pose2,
+        contact: DVec2,
+        alpha: f64,
+        f: f64,
+        p: &Prediction,
+        scored: AlongScore,
+    ) -> Option<PushPlan> {
+        let (start, h) = approach_start(contact, alpha, self.settings.start_radius_m)?;
+        let rot = DVec2::from_angle(estimate.theta);
+        let sw = DVec2::new(estimate.x, estimate.y) + rot.rotate(start);
+        let scaled = Prediction {
+            displacement: scored.displacement,
+            rotation_rad: scored.rotation,
+            ..*p
+        };
+        Some(PushPlan {
+            contact_obj: contact,
+            alpha_deg: alpha,
+            fraction: f,
+            prediction: scaled,
+            uncorrected_cross: scored.cross,
+            uncorrected_rotation_rad: scored.uncorrected_rotation,
+            predicted: scaled.apply_to(estimate),
+            cost: scored.cost,
+            track_m: scored.track_m,
+            start: Pose2::new(sw.x, sw.y, wrap_angle(h + estimate.theta)),
+        })
+    }
+}
+
+/// One candidate push along a path, scored (see [`PushPlanner::plan_along`]).
+#[derive(Debug, Clone, Copy)]
+struct AlongScore {
+    cost: f64,
+    /// The predicted track's mean distance to the path (offset by `offset_m`), m.
+    track_m: f64,
+    /// The predicted displacement (object frame, m) and rotation (rad), corrected.
+    displacement: DVec2,
+    rotation: f64,
+    /// The sideways part before the correction (see [`PushPlan::uncorrected_cross`]).
+    cross: DVec2,
+    uncorrected_rotation: f64,
 }
 
 /// `angle` (radians) wrapped to the nearest equivalent under a symmetry of `order`
@@ -747,6 +853,77 @@ mod tests {
             // So it never carries the object sideways more than the free choice.
             assert!(x1 <= x0 + 1e-12, "doubt {doubt}: {x1} > {x0}");
         }
+    }
+
+    #[test]
+    fn the_baseline_push_runs_through_the_centroid_at_the_target_and_is_scored_as_the_search_scores()
+     {
+        let ag = sliding_disc();
+        let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
+        let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
+        let follow = |fractions: &'static [f64]| PathFollowing {
+            path: &path,
+            push_fractions: fractions,
+            advance_m: 0.03,
+            track_weight: 3.0,
+            progress_weight: 0.5,
+            heading_tolerance_rad: None,
+            heading_weight_m_per_rad: 0.0,
+            offset_m: 0.0,
+            cross_gain: 0.5,
+            turn_gain: 1.0,
+            cross_doubt: 0.0,
+        };
+        // The disc 3 mm left of the path, turned 0.7 rad (the search works in its frame);
+        // the target 40 mm on along the path.
+        let from = Pose2::new(0.1, 0.003, 0.7);
+        let toward = DVec2::new(0.04, -0.003);
+        let base = planner
+            .plan_along_centroid_push(from, &follow(&[0.8]), toward, 0.8)
+            .expect("a centroid push");
+        // Through the centroid, from behind it, within half the contacts' spacing (1.5 deg
+        // for 120 of them) of the target's direction.
+        assert_eq!(base.alpha_deg, 0.0);
+        let off = wrap_angle(base.start.theta - toward.to_angle()).to_degrees();
+        assert!(
+            off.abs() <= 1.5 + 1e-9,
+            "heading {off:.2} deg off the target's"
+        );
+        let back = DVec2::new(base.start.x - from.x, base.start.y - from.y);
+        assert!(
+            back.normalize().dot(-toward.normalize()) > 0.999,
+            "starts at {back} from the centroid"
+        );
+        // The disc moves 30 mm along the heading for a full push: 0.8 of it is scaled by
+        // the fraction offset, and the prediction is along the heading (no sideways part).
+        let k = planner.settings().fraction_offset;
+        let moved = DVec2::new(base.predicted.x - from.x, base.predicted.y - from.y);
+        let want = 0.03 * (0.8 + k) / (1.0 + k);
+        assert!(
+            (moved.length() - want).abs() < 0.03 * want,
+            "moved {:.2} mm, {:.2} mm expected",
+            moved.length() * 1e3,
+            want * 1e3
+        );
+        // Its track's mean distance to the path, at a quarter, half, three quarters and
+        // the end of the straight run.
+        let track: f64 = (1..=4)
+            .map(|q| (from.y + moved.y * f64::from(q) / 4.0).abs())
+            .sum::<f64>()
+            / 4.0;
+        assert!(
+            (base.track_m - track).abs() < 1e-9,
+            "{} against {track}",
+            base.track_m
+        );
+        // The search over every push of that length finds none worse than it.
+        let best = planner.plan_along(from, &follow(&[0.8])).expect("a push");
+        assert!(
+            best.cost <= base.cost + 1e-12,
+            "{} > {}",
+            best.cost,
+            base.cost
+        );
     }
 
     #[test]

@@ -187,8 +187,9 @@ impl Security {
 }
 
 /// A bare Zenoh ping-pong between this process and a copy of it over the loopback, on the
-/// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, both
-/// ends waiting as `wait` says (a bridge's `AGP_WAIT`), for `seconds` of timed round trips
+/// transport a bridge with the key folder `tls` (mutual TLS) or none (plain TCP) uses, the
+/// pong end answering in Zenoh's receive callback (as a bridge's receiving end republishes
+/// there), the ping end waiting as `wait` says (a bridge's `AGP_BRIDGE_WAIT`), for `seconds` of timed round trips
 /// of `size` bytes: the locator and the figures.
 fn zenoh_floor(
     tls: Option<&Path>,
@@ -279,7 +280,6 @@ fn floor_pong(listen: &str, security: &Security) -> Result<u8> {
     agp_bridge::floor_pong(
         &Endpoint::listen(listen)?,
         keys.as_ref(),
-        bridge_wait_from_env()?,
         agp_runtime::shutdown_requested,
     )?;
     Ok(0)

@@ -58,7 +58,8 @@ struct Args {
     /// Seed of the IR, odometry and overhead-fix noise (default: the scenario's).
     #[arg(long, env = "AGP_SEED")]
     seed: Option<u64>,
-    /// Realtime: stop the wheels when no command arrived for this long (ms).
+    /// Realtime: stop the wheels when no command arrived for this long (ms), counted in
+    /// ticks of the realtime clock; a command answering a frame older than this is refused.
     #[arg(long, default_value_t = 250)]
     watchdog_ms: u64,
     /// Lockstep: give up when no command arrives for this long (s); 0 waits forever.
@@ -764,10 +765,10 @@ impl Runner {
     fn realtime(&mut self, waiter: &Waiter, watchdog: Duration) -> Result<()> {
         let period = Duration::from_secs_f64(1.0 / self.rate_hz);
         let mut wheels = (0.0, 0.0);
-        let mut last_command = Instant::now() - watchdog;
         let mut next = Instant::now();
         let mut ticks = TickAccount::default();
-        let mut dog = WatchdogAccount::new(watchdog);
+        // The watchdog and a command's age count ticks of this clock (watchdog.rs).
+        let mut dog = WatchdogAccount::new(watchdog, self.rate_hz);
         self.publish(0, TimingHeader::default())?;
         while !shutdown_requested() {
             if self.apply_resets()? {
@@ -779,6 +780,7 @@ impl Runner {
             let mut cause = TimingHeader::default();
             // The step of the newest frame a command of this tick answers.
             let mut answered = None;
+            let step = self.sim.step_count();
             while let Some(c) = self
                 .ports
                 .commands
@@ -794,15 +796,20 @@ impl Runner {
                 if c.epoch > self.active_epoch {
                     self.active_epoch = latest_epoch(&self.ports.epochs, self.active_epoch);
                 }
-                if c.epoch == self.active_epoch {
+                // A command held on its way longer than the watchdog (its frame older than
+                // that) would drive the robot on what it sensed long ago: refused, counted.
+                if c.epoch == self.active_epoch && dog.admits(step, c.step) {
                     wheels = (c.left_mps, c.right_mps);
-                    last_command = Instant::now();
                     cause = received(&c);
                     answered = Some(c.step);
                 }
             }
             if answered.is_some()
-                && let Some(stop) = dog.command(monotonic_ns())
+                && let Some(stop) = dog.command(
+                    monotonic_ns(),
+                    step,
+                    cause.stamps_ns[stage::FRAME_PUBLISHED],
+                )
             {
                 println!("agp-physics: {stop}");
             }
@@ -816,9 +823,9 @@ impl Runner {
                     self.active_epoch
                 );
             }
-            if last_command.elapsed() > watchdog {
+            if dog.expired(step) {
                 // Stale commands: stop, as the robot's firmware would.
-                if let Some(stop) = dog.fire(monotonic_ns(), wheels) {
+                if let Some(stop) = dog.fire(monotonic_ns(), step, wheels) {
                     println!("agp-physics: {}", stop.fired_line());
                 }
                 wheels = (0.0, 0.0);

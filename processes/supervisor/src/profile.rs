@@ -38,8 +38,10 @@
 //! physics and estimator, run in another instance) gets a second floor after the first: the
 //! link's, a bare Zenoh ping-pong between `agp` and a copy of itself (`agp bridge
 //! floor-pong`) on the bridge's own transport (mutual TLS with the bridge's key folder, or
-//! plain TCP), read from the bridge's command line, both ends waiting as the bridge does
-//! (`agp bridge --wait`, `block` by default), the pipeline paused meanwhile as for the first. The two hops that cross the link
+//! plain TCP), read from the bridge's command line: the pong end answers in Zenoh's
+//! receive callback, where a bridge's receiving end republishes, and the ping end waits for
+//! each answer as a bridge's sending end waits for its next message (`agp bridge --wait`,
+//! `block` by default); the pipeline is paused meanwhile as for the first. The two hops that cross the link
 //! (estimator->planner, planner->physics) are each given as a ratio to it: what the bridge
 //! costs beyond Zenoh's own.
 
@@ -1177,7 +1179,7 @@ impl LinkFloor {
             .collect();
         [
             format!(
-                "  link floor ({}): bare Zenoh ping-pong between two `agp` processes over the bridge's transport on the loopback, waiting as the bridge does, one-way = round trip / 2, {} round trips after the iceoryx2 floor: p50 {:.2} us, p99 {:.2} us",
+                "  link floor ({}): bare Zenoh ping-pong between two `agp` processes over the bridge's transport on the loopback, answered in Zenoh's callback and waited for as the bridge does, one-way = round trip / 2, {} round trips after the iceoryx2 floor: p50 {:.2} us, p99 {:.2} us",
                 self.transport,
                 self.figures.samples,
                 us(self.figures.p50_ns),
@@ -1215,8 +1217,8 @@ impl LinkFloor {
 }
 
 /// The Zenoh floor of instance `name`'s bridge, if one of its processes is an `agp bridge`
-/// (its transport, keys and waiting read from its command line and environment), both ends
-/// waiting as the bridge does, measured for `seconds` with the pipeline of `pause` paused
+/// (its transport, keys and waiting read from its command line and environment), answered
+/// in Zenoh's callback and waited for as the bridge does, measured for `seconds` with the pipeline of `pause` paused
 /// meanwhile. A floor that cannot be measured is said, and the
 /// profile goes on without it.
 fn link_floor(name: &str, seconds: f64, pause: Option<&Instance>) -> Option<LinkFloor> {

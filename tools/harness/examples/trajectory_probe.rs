@@ -11,6 +11,8 @@
 //! `XT` (the share of their predicted rotation), `XD` (the cost per metre of a short path
 //! push's predicted sideways motion), `XN` (the most pushes between circlings along a path),
 //! `XC` (m: circle once the pushes since the last circling predicted this much sideways),
+//! `XM` (m: the trust margin over the baseline's own push, `path_trust_margin_m`), `XCAP`
+//! (1: the circlings never raise the sideways share above `XG`),
 //! `AGDIR` (each seed's own AG, `AGDIR/seed-<S>/lshape.ag`, as `agp bench learn --seeds`
 //! writes them, instead of AG_FILE for every seed).
 
@@ -90,6 +92,12 @@ fn main() -> anyhow::Result<()> {
     }
     if let Some(v) = env("XC") {
         config.path_circle_after_cross_m = v;
+    }
+    if let Some(v) = env("XM") {
+        config.path_trust_margin_m = Some(v);
+    }
+    if let Some(v) = env("XCAP") {
+        config.path_cross_gain_capped = v > 0.0;
     }
     let ag_dir = std::env::var_os("AGDIR").map(std::path::PathBuf::from);
     let own_ags: Vec<(u64, AffordanceGradient)> = match &ag_dir {

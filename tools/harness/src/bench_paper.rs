@@ -4,10 +4,11 @@
 //! benchmark's seeds are merged by that benchmark's own `merge`.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use agp_planning::PlannerKind;
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use serde_json::{Map, Value, json};
 
 use crate::seeds::{
@@ -18,7 +19,10 @@ use crate::seeds::{
 use crate::bench_learn::{self, BenchLearnArgs};
 use crate::bench_tasks::{self, BenchPlaceArgs};
 use crate::bench_trajectory::{self, BenchTrajectoryArgs};
+use crate::pipeline_bench::{SLOTS_ENV, allowed_cpus};
+use crate::stop;
 use crate::task_goals::NamedPath;
+use agp_runtime::children::GuardedChild;
 
 /// The paper's figures (Sanchez-Fibla, Duff, Verschure; benchmarks.md).
 const PAPER_MAX_ROTATION_DEG: [(&str, f64); 3] = [("0", 39.51), ("15", 59.06), ("-15", 79.78)];
@@ -59,6 +63,14 @@ pub struct BenchPaperArgs {
     /// missed, naming each: for scripts and CI that must not read a table to see a miss.
     #[arg(long)]
     pub check: bool,
+    /// Task pipelines at once over the whole run, each on a core of its own. Above 1 (the
+    /// default: the machine's cores) each seed's trajectory and placement benchmarks run as
+    /// `agp bench` child processes side by side (their output in the seed's folder,
+    /// `<benchmark>.log`, shown as each ends), the next seed learning meanwhile, all of
+    /// them sharing the N pipelines; 1 runs one benchmark after the other in this process.
+    /// The figures are the same either way; only the wall times differ.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub jobs: Option<u64>,
 }
 
 /// Every target of the paper run that `doc` misses, one line each, in the order the table
@@ -114,51 +126,64 @@ fn one_seed(doc: Value) -> Value {
     }
 }
 
-/// One seed of the paper: learning at `seed` into `dir/learn/`, the trajectory and the
-/// placements on that seed with that seed's AG files; each benchmark's one-seed document.
-fn run_seed(args: &BenchPaperArgs, seed: u64, dir: &Path) -> Result<Value> {
-    let started = Instant::now();
+/// The learning phase of one seed: every object learned at `seed` into `dir/learn/`; the
+/// benchmark's document.
+fn learn_seed(seed: u64, dir: &Path) -> Result<Value> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("--out: cannot create the folder {}", dir.display()))?;
-    let learn_dir = dir.join("learn");
     println!("== seed {seed}: 1/3 learning phase ==");
-    let learn = bench_learn::learn(&BenchLearnArgs {
+    bench_learn::learn(&BenchLearnArgs {
         seeds: SeedArgs::one(seed),
         json: Some(dir.join("learn.json")),
-        ..BenchLearnArgs::for_scenarios(&LEARN_OBJECTS, learn_dir.clone())
-    })?;
-    let ag = |object: &str| Some(learn_dir.join(format!("{object}.ag")));
+        ..BenchLearnArgs::for_scenarios(&LEARN_OBJECTS, dir.join("learn"))
+    })
+}
 
-    println!("\n== seed {seed}: 2/3 push along a trajectory ==");
-    let trajectory = bench_trajectory::run_trajectory(&BenchTrajectoryArgs {
+/// The AG file `seed`'s learning wrote for `object` in the seed's folder `dir`.
+fn seed_ag(dir: &Path, object: &str) -> PathBuf {
+    dir.join("learn").join(format!("{object}.ag"))
+}
+
+/// The trajectory benchmark of one seed, on the seed's AG file, as `run_trajectory` takes it.
+fn trajectory_args(args: &BenchPaperArgs, seed: u64, dir: &Path) -> BenchTrajectoryArgs {
+    BenchTrajectoryArgs {
         scenario: TRAJECTORY_OBJECT.into(),
         // The paper's 600 mm line and the bent paths of the set (task_goals.rs).
         paths: NamedPath::SET.to_vec(),
-        ag: ag(TRAJECTORY_OBJECT),
+        ag: Some(seed_ag(dir, TRAJECTORY_OBJECT)),
         keep_heading: None,
         seeds: SeedArgs::one(seed),
         in_process: args.in_process,
         json: Some(dir.join("trajectory.json")),
         plot: Some(dir.join("trajectory.svg")),
-    })?;
-
-    println!("\n== seed {seed}: 3/3 position and orientation ==");
-    let mut place = Map::new();
-    for object in PLACE_OBJECTS {
-        let doc = bench_tasks::run_place(&BenchPlaceArgs {
-            scenario: object.into(),
-            episodes: args.episodes,
-            seeds: SeedArgs::one(seed),
-            planners: PlannerKind::ALL.to_vec(),
-            ag: ag(object),
-            in_process: args.in_process,
-            json: Some(dir.join(format!("place-{object}.json"))),
-            plot: Some(dir.join(format!("place-{object}.svg"))),
-        })?;
-        place.insert(object.into(), one_seed(doc));
-        println!();
     }
-    Ok(json!({
+}
+
+/// The placement benchmark of one seed and object, every planner, as `run_place` takes it.
+fn place_args(args: &BenchPaperArgs, seed: u64, dir: &Path, object: &str) -> BenchPlaceArgs {
+    BenchPlaceArgs {
+        scenario: object.into(),
+        episodes: args.episodes,
+        seeds: SeedArgs::one(seed),
+        planners: PlannerKind::ALL.to_vec(),
+        ag: Some(seed_ag(dir, object)),
+        in_process: args.in_process,
+        json: Some(dir.join(format!("place-{object}.json"))),
+        plot: Some(dir.join(format!("place-{object}.svg"))),
+    }
+}
+
+/// One seed's paper document from its benchmarks' documents (each as its own command
+/// returns or writes it).
+fn seed_doc(
+    args: &BenchPaperArgs,
+    seed: u64,
+    learn: Value,
+    trajectory: Value,
+    place: Map<String, Value>,
+    wall_time_s: f64,
+) -> Value {
+    json!({
         "benchmark": "paper",
         "seed": seed,
         "physics": if args.in_process { "in-process" } else { "pipeline" },
@@ -166,8 +191,283 @@ fn run_seed(args: &BenchPaperArgs, seed: u64, dir: &Path) -> Result<Value> {
         "learn": one_seed(learn),
         "trajectory": one_seed(trajectory),
         "place": place,
-        "wall_time_s": started.elapsed().as_secs_f64(),
-    }))
+        "wall_time_s": wall_time_s,
+    })
+}
+
+/// One seed of the paper in this process, one benchmark after the other: learning at
+/// `seed` into `dir/learn/`, the trajectory and the placements on that seed with that
+/// seed's AG files; each benchmark's one-seed document.
+fn run_seed(args: &BenchPaperArgs, seed: u64, dir: &Path) -> Result<Value> {
+    let started = Instant::now();
+    let learn = learn_seed(seed, dir)?;
+
+    println!("\n== seed {seed}: 2/3 push along a trajectory ==");
+    let trajectory = bench_trajectory::run_trajectory(&trajectory_args(args, seed, dir))?;
+
+    println!("\n== seed {seed}: 3/3 position and orientation ==");
+    let mut place = Map::new();
+    for object in PLACE_OBJECTS {
+        let doc = bench_tasks::run_place(&place_args(args, seed, dir, object))?;
+        place.insert(object.into(), one_seed(doc));
+        println!();
+    }
+    Ok(seed_doc(
+        args,
+        seed,
+        learn,
+        trajectory,
+        place,
+        started.elapsed().as_secs_f64(),
+    ))
+}
+
+/// One task benchmark of one seed running as a child `agp bench` process.
+struct TaskChild {
+    /// `trajectory`, `place-triangle`, ...: its JSON, plot and logs are `<name>.*`.
+    name: String,
+    child: GuardedChild,
+    /// Its exit status, once it ended.
+    ended: Option<std::process::ExitStatus>,
+}
+
+/// A seed whose tasks run as child processes.
+struct SeedTasks {
+    seed: u64,
+    dir: PathBuf,
+    started: Instant,
+    learn: Value,
+    tasks: Vec<TaskChild>,
+    /// When its last task ended.
+    finished: Option<Instant>,
+}
+
+/// The command line of `agp bench` that runs what `run_trajectory` / `run_place` would
+/// with these arguments.
+fn trajectory_command(t: &BenchTrajectoryArgs) -> Vec<String> {
+    let paths: Vec<&str> = t.paths.iter().map(|p| p.name()).collect();
+    let mut argv = vec![
+        "trajectory".to_owned(),
+        "--scenario".to_owned(),
+        t.scenario.clone(),
+        "--paths".to_owned(),
+        paths.join(","),
+    ];
+    push_common(&mut argv, t.ag.as_deref(), &t.seeds, t.in_process);
+    push_outputs(&mut argv, t.json.as_deref(), t.plot.as_deref());
+    argv
+}
+
+fn place_command(p: &BenchPlaceArgs) -> Vec<String> {
+    let planners: Vec<&str> = p.planners.iter().map(|k| k.name()).collect();
+    let mut argv = vec![
+        "place".to_owned(),
+        "--scenario".to_owned(),
+        p.scenario.clone(),
+        "--episodes".to_owned(),
+        p.episodes.to_string(),
+        "--planners".to_owned(),
+        planners.join(","),
+    ];
+    push_common(&mut argv, p.ag.as_deref(), &p.seeds, p.in_process);
+    push_outputs(&mut argv, p.json.as_deref(), p.plot.as_deref());
+    argv
+}
+
+fn push_common(argv: &mut Vec<String>, ag: Option<&Path>, seeds: &SeedArgs, in_process: bool) {
+    if let Some(ag) = ag {
+        argv.push("--ag".to_owned());
+        argv.push(ag.display().to_string());
+    }
+    for seed in seeds.all() {
+        argv.push("--seed".to_owned());
+        argv.push(seed.to_string());
+    }
+    if in_process {
+        argv.push("--in-process".to_owned());
+    }
+}
+
+fn push_outputs(argv: &mut Vec<String>, json: Option<&Path>, plot: Option<&Path>) {
+    for (flag, path) in [("--json", json), ("--plot", plot)] {
+        if let Some(path) = path {
+            argv.push(flag.to_owned());
+            argv.push(path.display().to_string());
+        }
+    }
+}
+
+impl SeedTasks {
+    /// Learns `seed` here, then starts its trajectory and placements as child processes
+    /// sharing the pipelines' slots in `slots`.
+    fn start(args: &BenchPaperArgs, seed: u64, dir: PathBuf, slots: &Path) -> Result<Self> {
+        let started = Instant::now();
+        let learn = learn_seed(seed, &dir)?;
+        let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
+        let mut commands = vec![(
+            "trajectory".to_owned(),
+            trajectory_command(&trajectory_args(args, seed, &dir)),
+        )];
+        for object in PLACE_OBJECTS {
+            commands.push((
+                format!("place-{object}"),
+                place_command(&place_args(args, seed, &dir, object)),
+            ));
+        }
+        let mut tasks = Vec::with_capacity(commands.len());
+        for (name, argv) in commands {
+            let file = |ext: &str| -> Result<std::fs::File> {
+                let path = dir.join(format!("{name}.{ext}"));
+                std::fs::File::create(&path)
+                    .with_context(|| format!("cannot create {}", path.display()))
+            };
+            let mut cmd = Command::new(&exe);
+            cmd.arg("bench")
+                .args(&argv)
+                .env(SLOTS_ENV, slots)
+                .stdin(Stdio::null())
+                .stdout(file("log")?)
+                .stderr(file("err")?);
+            let child = GuardedChild::spawn(&format!("agp bench {name}"), &mut cmd)?;
+            tasks.push(TaskChild {
+                name,
+                child,
+                ended: None,
+            });
+        }
+        println!(
+            "\n== seed {seed}: 2/3 and 3/3, the trajectory and the placements, started beside the rest (their output in {}) ==\n",
+            dir.display()
+        );
+        Ok(Self {
+            seed,
+            dir,
+            started,
+            learn,
+            tasks,
+            finished: None,
+        })
+    }
+
+    /// Notes the tasks that ended since the last look, printing each one's output; fails
+    /// on a task that failed.
+    fn poll(&mut self) -> Result<()> {
+        for task in &mut self.tasks {
+            if task.ended.is_some() {
+                continue;
+            }
+            let Some(status) = task.child.try_wait()? else {
+                continue;
+            };
+            task.ended = Some(status);
+            let log = std::fs::read_to_string(self.dir.join(format!("{}.log", task.name)))
+                .unwrap_or_default();
+            println!("== seed {}: {} ==", self.seed, task.name);
+            print!("{log}");
+            println!();
+            if !status.success() {
+                let err = std::fs::read_to_string(self.dir.join(format!("{}.err", task.name)))
+                    .unwrap_or_default();
+                let tail: Vec<&str> = err.lines().rev().take(5).collect();
+                bail!(
+                    "seed {}: `agp bench {}` exited with {status}: {}",
+                    self.seed,
+                    task.name,
+                    tail.into_iter().rev().collect::<Vec<_>>().join(" / ")
+                );
+            }
+        }
+        if self.finished.is_none() && self.tasks.iter().all(|t| t.ended.is_some()) {
+            self.finished = Some(Instant::now());
+        }
+        Ok(())
+    }
+
+    /// Stops every task still running (each writes its partial JSON).
+    fn stop(&mut self) {
+        for task in &mut self.tasks {
+            if task.ended.is_none() {
+                let _ = task.child.stop(Duration::from_secs(60));
+            }
+        }
+    }
+
+    /// The seed's paper document, from the JSON its tasks wrote.
+    fn doc(self, args: &BenchPaperArgs) -> Result<Value> {
+        let read = |name: &str| -> Result<Value> {
+            let path = self.dir.join(format!("{name}.json"));
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))
+        };
+        let trajectory = read("trajectory")?;
+        let mut place = Map::new();
+        for object in PLACE_OBJECTS {
+            place.insert(object.into(), one_seed(read(&format!("place-{object}"))?));
+        }
+        let wall = self
+            .finished
+            .unwrap_or_else(Instant::now)
+            .duration_since(self.started);
+        Ok(seed_doc(
+            args,
+            self.seed,
+            self.learn,
+            trajectory,
+            place,
+            wall.as_secs_f64(),
+        ))
+    }
+}
+
+/// The seeds of this run with their tasks side by side ([`BenchPaperArgs::jobs`]): each seed
+/// learns here, then its three task benchmarks start as child processes; the children of
+/// every seed share `jobs` pipeline slots (one core each). The seeds' documents, in order.
+fn run_seeds_side_by_side(
+    args: &BenchPaperArgs,
+    seeds: &[u64],
+    dir_of: impl Fn(u64) -> PathBuf,
+    jobs: u64,
+) -> Result<Vec<Value>> {
+    let slots = tempfile::Builder::new()
+        .prefix("agp-bench-slots-")
+        .tempdir()
+        .context("cannot create the folder of the pipelines' slots")?;
+    for k in 0..jobs {
+        let path = slots.path().join(format!("slot-{k}"));
+        std::fs::File::create(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+    }
+    let _checked = stop::checked();
+    let mut running: Vec<SeedTasks> = Vec::with_capacity(seeds.len());
+    let outcome = (|| -> Result<()> {
+        for &seed in seeds {
+            if stop::requested() {
+                bail!("interrupted");
+            }
+            running.push(SeedTasks::start(args, seed, dir_of(seed), slots.path())?);
+            for s in &mut running {
+                s.poll()?;
+            }
+        }
+        while running.iter().any(|s| s.finished.is_none()) {
+            if stop::requested() {
+                bail!("interrupted");
+            }
+            for s in &mut running {
+                s.poll()?;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Ok(())
+    })();
+    if let Err(e) = outcome {
+        for s in &mut running {
+            s.stop();
+        }
+        return Err(e);
+    }
+    running.into_iter().map(|s| s.doc(args)).collect()
 }
 
 /// Runs the three benchmarks at every seed of this run (its shard's share with `--shard`),
@@ -178,15 +478,25 @@ pub fn run(args: &BenchPaperArgs) -> Result<Value> {
         .with_context(|| format!("--out: cannot create the folder {}", args.out.display()))?;
     let all_seeds = args.seeds.all();
     let seeds = args.seeds.mine();
-    let mut docs = Vec::with_capacity(seeds.len());
-    for &seed in &seeds {
-        let dir = if all_seeds.len() > 1 {
+    let dir_of = |seed: u64| {
+        if all_seeds.len() > 1 {
             args.out.join(format!("seed-{seed}"))
         } else {
             args.out.clone()
-        };
-        docs.push(run_seed(args, seed, &dir)?);
-    }
+        }
+    };
+    let jobs = args
+        .jobs
+        .unwrap_or_else(|| allowed_cpus().len().max(1) as u64);
+    let docs = if jobs > 1 && !args.in_process {
+        run_seeds_side_by_side(args, &seeds, dir_of, jobs)?
+    } else {
+        let mut docs = Vec::with_capacity(seeds.len());
+        for &seed in &seeds {
+            docs.push(run_seed(args, seed, &dir_of(seed))?);
+        }
+        docs
+    };
     let parts = run_parts(&docs, "paper", paper_signature, all_seeds.clone())?;
     let mut doc = assemble(&parts, args.seeds.shard)?;
     doc["wall_time_s"] = json!(wall.elapsed().as_secs_f64());

@@ -5,8 +5,10 @@
 //! episode (a reset, as the learning protocol does) and reads ground truth, which no
 //! planner but the oracle sees. Every file of the instance is removed at the end.
 
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use agp_planning::{EpisodeConfig, EpisodeEnd, EpisodeResult, PlannerKind, Task};
@@ -23,6 +25,168 @@ use agp_runtime::children::{GuardedChild, sibling_executable};
 const LINK_TIMEOUT: Duration = Duration::from_secs(60);
 /// Longest wall time one episode may take before the benchmark gives up on it.
 const EPISODE_WALL_LIMIT: Duration = Duration::from_secs(600);
+
+/// Whether each pipeline's processes are pinned to one core ([`CoreLease`]): `AGP_BENCH_PIN`
+/// `0` turns it off, anything else (or unset) leaves it on.
+fn pinning_wanted() -> bool {
+    std::env::var("AGP_BENCH_PIN").map_or(true, |v| v.trim() != "0")
+}
+
+/// The environment variable naming a folder of slot files (`slot-0`, `slot-1`, ...) shared
+/// by several bench processes: a pipeline runs only while it holds one slot's lock, on that
+/// slot's core, so benches started side by side (`agp bench paper --jobs N`) run at most N
+/// pipelines at once between them.
+pub const SLOTS_ENV: &str = "AGP_BENCH_SLOTS";
+
+/// How many pipelines of this process run on each core the process may use, by the
+/// core's place in [`allowed_cpus`] (without [`SLOTS_ENV`]).
+static PIPELINES_ON_CORE: Mutex<Vec<usize>> = Mutex::new(Vec::new());
+
+/// The cores this process may run on (its affinity mask), ascending; empty when the mask
+/// cannot be read.
+pub fn allowed_cpus() -> Vec<usize> {
+    // SAFETY: an all-zero `cpu_set_t` is a valid empty set; `sched_getaffinity` writes at
+    // most `size_of::<cpu_set_t>()` bytes into the set we own.
+    let (set, ok) = unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        let ok = libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) == 0;
+        (set, ok)
+    };
+    if !ok {
+        return Vec::new();
+    }
+    (0..libc::CPU_SETSIZE as usize)
+        // SAFETY: `c` is below CPU_SETSIZE, the set's size in bits.
+        .filter(|&c| unsafe { libc::CPU_ISSET(c, &set) })
+        .collect()
+}
+
+/// The set holding `cpu` alone.
+fn cpu_set_of(cpu: usize) -> libc::cpu_set_t {
+    // SAFETY: an all-zero `cpu_set_t` is a valid empty set, and callers pass a core of the
+    // affinity mask, which is below CPU_SETSIZE.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        set
+    }
+}
+
+/// Where a pipeline runs: one core for all its processes (physics, the estimator, each
+/// episode's planner), and with [`SLOTS_ENV`] the slot it holds. A lockstep step passes the
+/// three processes one after the other, so one core holds a ring; pipelines side by side
+/// each on a core of their own no longer wait for each other's polling processes in their
+/// handoffs (README, The paper's tasks, gives the figures). Results do not change: a
+/// lockstep run is the same whatever the scheduling. The lease gives the core (and the
+/// slot) back when dropped.
+struct CoreLease {
+    /// The core's place in [`allowed_cpus`] (its count in [`PIPELINES_ON_CORE`]), without
+    /// slots.
+    counted: Option<usize>,
+    /// The locked slot file, with [`SLOTS_ENV`]: unlocked when closed.
+    _slot: Option<std::fs::File>,
+    /// The core, when pinning is on.
+    set: Option<libc::cpu_set_t>,
+}
+
+impl CoreLease {
+    /// Where a new pipeline runs. With [`SLOTS_ENV`] it waits for a free slot (its core:
+    /// the slot's number modulo the cores); without, it takes the core with the fewest of
+    /// this process's pipelines. `Ok(None)`: anywhere (pinning off, one core, no slots).
+    fn take() -> Result<Option<Self>> {
+        let cpus = allowed_cpus();
+        let pinning = pinning_wanted() && cpus.len() > 1;
+        if let Some(dir) = std::env::var_os(SLOTS_ENV) {
+            let (k, file) = take_slot(Path::new(&dir))?;
+            return Ok(Some(Self {
+                counted: None,
+                _slot: Some(file),
+                set: pinning.then(|| cpu_set_of(cpus[k % cpus.len()])),
+            }));
+        }
+        if !pinning {
+            return Ok(None);
+        }
+        let mut counts = PIPELINES_ON_CORE
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        counts.resize(cpus.len(), 0);
+        let Some(k) = (0..cpus.len()).min_by_key(|&k| counts[k]) else {
+            return Ok(None);
+        };
+        counts[k] += 1;
+        Ok(Some(Self {
+            counted: Some(k),
+            _slot: None,
+            set: Some(cpu_set_of(cpus[k])),
+        }))
+    }
+
+    /// Makes `cmd`'s process start on this lease's core, if it has one.
+    fn pin(&self, cmd: &mut Command) {
+        let Some(set) = self.set else {
+            return;
+        };
+        // SAFETY: between fork and exec only `sched_setaffinity`, a plain system call on the
+        // child itself, reading the copied set.
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+}
+
+impl Drop for CoreLease {
+    fn drop(&mut self) {
+        if let Some(k) = self.counted {
+            let mut counts = PIPELINES_ON_CORE
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if let Some(n) = counts.get_mut(k) {
+                *n = n.saturating_sub(1);
+            }
+        }
+    }
+}
+
+/// Waits until one of the slot files `slot-0`, `slot-1`, ... in `dir` can be locked; its
+/// number and the locked file. Gives up at a shutdown request.
+fn take_slot(dir: &Path) -> Result<(usize, std::fs::File)> {
+    use std::os::fd::AsRawFd;
+    let mut count = 0;
+    while dir.join(format!("slot-{count}")).is_file() {
+        count += 1;
+    }
+    if count == 0 {
+        bail!("{SLOTS_ENV}={}: no slot file `slot-0` there", dir.display());
+    }
+    loop {
+        for k in 0..count {
+            let path = dir.join(format!("slot-{k}"));
+            let file = std::fs::File::open(&path)
+                .with_context(|| format!("cannot open the slot file {}", path.display()))?;
+            // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
+            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+                return Ok((k, file));
+            }
+        }
+        if agp_runtime::shutdown_requested() {
+            bail!("interrupted");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Pins `cmd` to `core`'s core, when the pipeline has one.
+fn pin(core: Option<&CoreLease>, cmd: &mut Command) {
+    if let Some(core) = core {
+        core.pin(cmd);
+    }
+}
 
 /// A running private pipeline for benchmark episodes.
 pub struct PipelineBench {
@@ -44,6 +208,8 @@ pub struct PipelineBench {
     online: bool,
     /// Ground-truth samples the evaluation missed (its buffer overflowed), all episodes.
     pub truth_gaps: u64,
+    /// The core every process of this pipeline runs on (none when pinning is off).
+    core: Option<CoreLease>,
 }
 
 impl PipelineBench {
@@ -69,8 +235,10 @@ impl PipelineBench {
         scenario_arg: &str,
         ag: Option<&Path>,
         online: bool,
+        core: Option<&CoreLease>,
     ) -> Result<GuardedChild> {
         let mut cmd = Command::new(sibling_executable("agp-estimator")?);
+        pin(core, &mut cmd);
         cmd.args(["--instance", name, "--scenario", scenario_arg])
             .stdin(Stdio::null())
             .stdout(Stdio::null());
@@ -97,7 +265,9 @@ impl PipelineBench {
             .remove_files()
             .context("cannot clear the bench's instance files")?;
         let logs = tempfile::tempdir().context("cannot create a folder for the episode logs")?;
+        let core = CoreLease::take()?;
         let mut cmd = Command::new(sibling_executable("agp-physics")?);
+        pin(core.as_ref(), &mut cmd);
         cmd.args(["--instance", &name, "--scenario", scenario_arg])
             .args(["--clock", "lockstep", "--idle-timeout-s", "0"])
             .args(["--seed", &seed.to_string()])
@@ -105,7 +275,13 @@ impl PipelineBench {
             .stdout(Stdio::null());
         let physics = GuardedChild::spawn("agp-physics", &mut cmd)?;
         // The estimator perceives for every planner; with `ag` it also serves its gradients.
-        let estimator = Some(Self::spawn_estimator(&name, scenario_arg, ag, online)?);
+        let estimator = Some(Self::spawn_estimator(
+            &name,
+            scenario_arg,
+            ag,
+            online,
+            core.as_ref(),
+        )?);
         let driver = match LockstepDriver::connect(
             &instance,
             "bench",
@@ -137,6 +313,7 @@ impl PipelineBench {
             episodes: 0,
             online,
             truth_gaps: 0,
+            core,
         })
     }
 
@@ -168,6 +345,7 @@ impl PipelineBench {
                 &self.scenario_arg,
                 None,
                 true,
+                self.core.as_ref(),
             )?);
         }
         // The episode starts from the reset: only its samples count.
@@ -183,6 +361,7 @@ impl PipelineBench {
             .path()
             .join(format!("episode-{}.stderr", self.episodes));
         let mut cmd = Command::new(sibling_executable("agp-planner")?);
+        pin(self.core.as_ref(), &mut cmd);
         cmd.args(["--instance", self.instance.name()])
             .args(["--scenario", &self.scenario_arg])
             .args(["--clock", "lockstep", "--planner", planner.name()])
@@ -347,5 +526,38 @@ impl PlannerView {
             sim_time_s: num("sim_time_s")?,
             final_estimate,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn benches_sharing_slot_files_hold_each_slot_once_and_free_it_when_done() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        for k in 0..2 {
+            std::fs::File::create(dir.path().join(format!("slot-{k}"))).expect("slot file");
+        }
+        let (first, held) = take_slot(dir.path()).expect("a free slot");
+        let (second, _held_too) = take_slot(dir.path()).expect("the other slot");
+        assert_eq!(
+            (first, second),
+            (0, 1),
+            "two pipelines, two different slots"
+        );
+        drop(held);
+        let (again, _) = take_slot(dir.path()).expect("the slot given back");
+        assert_eq!(
+            again, 0,
+            "a finished pipeline's slot is taken by the next one"
+        );
+    }
+
+    #[test]
+    fn a_slot_folder_without_slot_files_is_refused_by_name() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let err = take_slot(dir.path()).expect_err("no slot to take");
+        assert!(err.to_string().contains("slot-0"), "{err}");
     }
 }

@@ -12,6 +12,11 @@ use std::path::Path;
 pub struct LoggedStop {
     /// The last fresh command before the stop, monotonic ns.
     pub last_command_ns: u64,
+    /// When the frame that command answered was published, monotonic ns (0: not said).
+    pub last_frame_ns: u64,
+    /// Ticks of physics's realtime clock from that command to the stop, and the watchdog
+    /// period in ticks (`None`: a line of a physics that did not say them).
+    pub ticks: Option<(u64, u64)>,
     /// The tick the watchdog stopped the wheels.
     pub fired_ns: u64,
     /// The next fresh command (`None`: none came before physics ended).
@@ -45,6 +50,8 @@ impl LoggedStop {
         let resumed = int("resumed_ns")?;
         Some(Self {
             last_command_ns: int("last_command_ns")?,
+            last_frame_ns: int("last_frame_ns").unwrap_or(0),
+            ticks: int("ticks").zip(int("watchdog_ticks")),
             fired_ns: int("fired_ns")?,
             resumed_ns: (resumed != 0).then_some(resumed),
             wheels_mm_s: (l.parse().ok()?, r.parse().ok()?),
@@ -62,6 +69,13 @@ impl LoggedStop {
     /// From the last command to the watchdog's stop, ms.
     pub fn stopped_after_ms(&self) -> f64 {
         self.fired_ns.saturating_sub(self.last_command_ns) as f64 * 1e-6
+    }
+
+    /// Whether the wheels turned on the last command for more ticks of physics's clock than
+    /// its watchdog period (physics stops them in the tick one period after; `None` when the
+    /// line does not say).
+    pub fn stopped_late(&self) -> Option<bool> {
+        self.ticks.map(|(t, period)| t > period)
     }
 }
 
@@ -129,7 +143,18 @@ mod tests {
             (1000, 2000, Some(3000))
         );
         assert_eq!(s.wheels_mm_s, (100.0, -20.0));
+        assert_eq!(
+            (s.last_frame_ns, s.ticks, s.stopped_late()),
+            (0, None, None)
+        );
         assert!(s.accounted && s.was_moving());
+        let ticked = LINE.replace(
+            "[last_command_ns=1000 ",
+            "[last_command_ns=1000 last_frame_ns=990 ticks=161 watchdog_ticks=160 ",
+        );
+        let t = LoggedStop::parse(&ticked).expect("a stop");
+        assert_eq!((t.last_frame_ns, t.ticks), (990, Some((161, 160))));
+        assert_eq!(t.stopped_late(), Some(true));
         assert!((s.motion_mm - 0.0015).abs() < 1e-12);
         assert!((s.turn_deg - 0.002).abs() < 1e-12);
         let open = LINE.replace("resumed_ns=3000", "resumed_ns=0");
@@ -153,6 +178,8 @@ mod tests {
     fn a_fault_is_matched_with_the_stop_that_spans_it_not_an_earlier_one() {
         let stop = |last, resumed| LoggedStop {
             last_command_ns: last,
+            last_frame_ns: 0,
+            ticks: None,
             fired_ns: last + 250,
             resumed_ns: resumed,
             wheels_mm_s: (0.0, 0.0),

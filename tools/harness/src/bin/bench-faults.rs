@@ -1661,14 +1661,32 @@ enum LinkBack {
 /// `down_ns` to `up_ns`, when the tool brought it back): a command applied after the link
 /// went down, commands again before it was back, the wheels stopped later than the
 /// watchdog, the robot moved beyond one watchdog period after the stop.
+///
+/// A command applied more than [`IN_FLIGHT`] after the link went down is wrong unless it
+/// answered a frame physics published before that (it was on its way; physics applies such
+/// a command only if its frame is at most one watchdog period old, and refuses it else).
+/// The wheels' stop is judged in ticks of physics's realtime clock (one watchdog period of
+/// ticks at most on the last command): a physics descheduled on a loaded machine delays its
+/// ticks, and the world with them. A physics that does not say its ticks is judged on the
+/// machine's clock, with [`LATE_TICK`] of slack.
 fn judge_stop(stop: &LoggedStop, down_ns: u64, up_ns: Option<u64>) -> Option<String> {
     let ns = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
     let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * 1e-6;
     let mut wrong = Vec::new();
-    if stop.last_command_ns > down_ns + ns(IN_FLIGHT) {
+    if stop.last_command_ns > down_ns + ns(IN_FLIGHT)
+        && (stop.last_frame_ns == 0 || stop.last_frame_ns > down_ns)
+    {
         wrong.push(format!(
-            "a command applied {:.0} ms after the link went down",
-            ms(down_ns, stop.last_command_ns)
+            "a command applied {:.0} ms after the link went down{}",
+            ms(down_ns, stop.last_command_ns),
+            if stop.last_frame_ns == 0 {
+                String::new()
+            } else {
+                format!(
+                    ", answering a frame published {:.0} ms after it",
+                    ms(down_ns, stop.last_frame_ns)
+                )
+            }
         ));
     }
     if let (Some(up), Some(resumed)) = (up_ns, stop.resumed_ns)
@@ -1679,12 +1697,18 @@ fn judge_stop(stop: &LoggedStop, down_ns: u64, up_ns: Option<u64>) -> Option<Str
             ms(resumed, up)
         ));
     }
-    if stop.stopped_after_ms() > (WATCHDOG + LATE_TICK).as_secs_f64() * 1e3 {
-        wrong.push(format!(
-            "the wheels stopped {:.0} ms after the last command (watchdog {} ms)",
-            stop.stopped_after_ms(),
-            WATCHDOG.as_millis()
-        ));
+    match (stop.stopped_late(), stop.ticks) {
+        (Some(true), Some((ticks, period))) => wrong.push(format!(
+            "the wheels turned {ticks} ticks of physics's clock on the last command (watchdog {period})"
+        )),
+        (None, _) if stop.stopped_after_ms() > (WATCHDOG + LATE_TICK).as_secs_f64() * 1e3 => {
+            wrong.push(format!(
+                "the wheels stopped {:.0} ms after the last command (watchdog {} ms)",
+                stop.stopped_after_ms(),
+                WATCHDOG.as_millis()
+            ))
+        }
+        _ => {}
     }
     if stop.accounted && (stop.motion_mm > STILL_MM || stop.turn_deg > STILL_DEG) {
         wrong.push(format!(
