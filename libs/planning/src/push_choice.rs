@@ -715,6 +715,29 @@ mod tests {
         learner.into_gradient()
     }
 
+    /// Following `path` with pushes of `push_fractions`, aiming `advance_m` on: the
+    /// tests' weights (track 3, progress 0.5), no heading, no offset, half the sideways
+    /// share, no doubt.
+    fn along<'p>(
+        path: &'p [DVec2],
+        push_fractions: &'p [f64],
+        advance_m: f64,
+    ) -> PathFollowing<'p> {
+        PathFollowing {
+            path,
+            push_fractions,
+            advance_m,
+            track_weight: 3.0,
+            progress_weight: 0.5,
+            heading_tolerance_rad: None,
+            heading_weight_m_per_rad: 0.0,
+            offset_m: 0.0,
+            cross_gain: 0.5,
+            turn_gain: 1.0,
+            cross_doubt: 0.0,
+        }
+    }
+
     #[test]
     fn a_path_offset_moves_the_planned_track_by_the_offset() {
         let ag = sliding_disc();
@@ -724,17 +747,9 @@ mod tests {
         let from = Pose2::new(0.0, 0.002, 0.0);
         let end = |offset_m: f64| {
             let follow = PathFollowing {
-                path: &path,
-                push_fractions: &[1.0],
-                advance_m: 0.03,
-                track_weight: 3.0,
-                progress_weight: 0.5,
-                heading_tolerance_rad: None,
-                heading_weight_m_per_rad: 0.0,
                 offset_m,
                 cross_gain: 1.0,
-                turn_gain: 1.0,
-                cross_doubt: 0.0,
+                ..along(&path, &[1.0], 0.03)
             };
             let plan = planner.plan_along(from, &follow).expect("a push");
             DVec2::new(plan.predicted.x, plan.predicted.y)
@@ -763,18 +778,10 @@ mod tests {
         let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
         let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
         let plan = |cross_gain: f64, fraction: f64| {
+            let fractions = [fraction];
             let follow = PathFollowing {
-                path: &path,
-                push_fractions: &[fraction],
-                advance_m: 0.01,
-                track_weight: 3.0,
-                progress_weight: 0.5,
-                heading_tolerance_rad: None,
-                heading_weight_m_per_rad: 0.0,
-                offset_m: 0.0,
                 cross_gain,
-                turn_gain: 1.0,
-                cross_doubt: 0.0,
+                ..along(&path, &fractions, 0.01)
             };
             planner
                 .plan_along(Pose2::new(0.0, 0.0, 0.0), &follow)
@@ -823,17 +830,8 @@ mod tests {
         let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
         let plan = |cross_doubt: f64| {
             let follow = PathFollowing {
-                path: &path,
-                push_fractions: &[0.375, 0.25],
-                advance_m: 0.04,
-                track_weight: 3.0,
-                progress_weight: 0.5,
-                heading_tolerance_rad: None,
-                heading_weight_m_per_rad: 0.0,
-                offset_m: 0.0,
-                cross_gain: 0.5,
-                turn_gain: 1.0,
                 cross_doubt,
+                ..along(&path, &[0.375, 0.25], 0.04)
             };
             planner
                 .plan_along(Pose2::new(0.0, 0.002, 0.0), &follow)
@@ -861,19 +859,7 @@ mod tests {
         let ag = sliding_disc();
         let planner = PushPlanner::new(&ag, PushChoiceSettings::new(0, 0.1));
         let path = [DVec2::ZERO, DVec2::new(0.6, 0.0)];
-        let follow = |fractions: &'static [f64]| PathFollowing {
-            path: &path,
-            push_fractions: fractions,
-            advance_m: 0.03,
-            track_weight: 3.0,
-            progress_weight: 0.5,
-            heading_tolerance_rad: None,
-            heading_weight_m_per_rad: 0.0,
-            offset_m: 0.0,
-            cross_gain: 0.5,
-            turn_gain: 1.0,
-            cross_doubt: 0.0,
-        };
+        let follow = |fractions: &'static [f64]| along(&path, fractions, 0.03);
         // The disc 3 mm left of the path, turned 0.7 rad (the search works in its frame);
         // the target 40 mm on along the path.
         let from = Pose2::new(0.1, 0.003, 0.7);
