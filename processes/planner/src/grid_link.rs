@@ -180,7 +180,7 @@ impl std::fmt::Display for EstimatorWaitsToLearn {
         } else {
             write!(
                 f,
-                "no AG file at {} and the estimator waits for a planner to learn `{}`: learn it first with `--learn-if-missing` on this planner (the estimator run with `--reuse`) or `agp bench learn`",
+                "no AG file at {} and the estimator waits for a planner to learn `{}`: learn it first (`agp up` with launch.toml, or `agp bench learn`), or on the lockstep clock give this planner `--learn-if-missing` (the estimator `--reuse`)",
                 self.ag_file.display(),
                 self.object
             )

@@ -80,7 +80,7 @@ pub fn detach(launch: &Path, instance_arg: Option<&str>, config: &LaunchConfig) 
             let _ = crate::control::down(&config.instance, std::time::Duration::from_secs(20));
             let _ = child.wait();
             let text = std::fs::read_to_string(&log_path).unwrap_or_default();
-            for line in text.lines().filter(|l| l.contains("error")) {
+            for line in error_lines(&text) {
                 console::warn(format_args!("{line}"));
             }
             anyhow::bail!(
@@ -128,5 +128,35 @@ pub fn detach(launch: &Path, instance_arg: Option<&str>, config: &LaunchConfig) 
             );
         }
         std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// The lines of a run's log that say an error, each once, in the order they came: a
+/// process restarted for the same fault says the same line again, and a reader needs it
+/// once.
+fn error_lines(log: &str) -> Vec<&str> {
+    let mut seen = std::collections::HashSet::new();
+    log.lines()
+        .filter(|l| l.contains("error") && seen.insert(*l))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_lines;
+
+    #[test]
+    fn a_process_restarted_for_the_same_error_has_its_line_printed_once() {
+        let log = "agp-planner: error: no AG file at results/triangle.ag\n\
+                   [   0.250 s] planner: exited with status 1, restarting\n\
+                   agp-planner: error: no AG file at results/triangle.ag\n\
+                   agp-estimator: error: another fault\n";
+        assert_eq!(
+            error_lines(log),
+            [
+                "agp-planner: error: no AG file at results/triangle.ag",
+                "agp-estimator: error: another fault"
+            ]
+        );
     }
 }
