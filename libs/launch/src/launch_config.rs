@@ -223,6 +223,40 @@ impl Default for RestartConfig {
     }
 }
 
+impl ProcessConfig {
+    /// Whether this process is an agp bridge ([`is_bridge`]).
+    pub fn is_bridge(&self) -> bool {
+        is_bridge(&self.exec, &self.args)
+    }
+
+    /// The side a bridge serves ([`bridge_side`]); `None` for any other process.
+    pub fn bridge_side(&self) -> Option<&str> {
+        bridge_side(&self.exec, &self.args)
+    }
+}
+
+/// Whether the command `exec args` runs an agp bridge: `agp bridge ...` (what a `remote`
+/// process becomes; `agp` then execs `agp-bridge` beside it) or `agp-bridge ...` written out.
+/// A process swapped in with another command is asked with that command.
+pub fn is_bridge(exec: &Path, args: &[String]) -> bool {
+    match exec.file_name().and_then(|n| n.to_str()) {
+        Some("agp") => args.first().is_some_and(|a| a == "bridge"),
+        Some("agp-bridge") => true,
+        _ => false,
+    }
+}
+
+/// The side (`robot` or `planner`, as its `--side` says) of the bridge `exec args` runs;
+/// `None` when it runs no bridge, or one without a side (`keygen`, `floor`).
+pub fn bridge_side<'a>(exec: &Path, args: &'a [String]) -> Option<&'a str> {
+    if !is_bridge(exec, args) {
+        return None;
+    }
+    args.windows(2)
+        .find(|w| w[0] == "--side")
+        .map(|w| w[1].as_str())
+}
+
 /// When a process is restarted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RestartPolicy {
@@ -552,13 +586,9 @@ impl LaunchConfig {
     /// bridge (a `remote = { role = "planner", ... }` process, or an `agp bridge --side
     /// robot` written out): the judge here then has a task only if the far planner sent one.
     pub fn planner_is_remote(&self) -> bool {
-        self.processes.iter().any(|p| {
-            p.exec.file_name().is_some_and(|n| n == "agp")
-                && p.args.first().is_some_and(|a| a == "bridge")
-                && p.args
-                    .windows(2)
-                    .any(|w| w[0] == "--side" && w[1] == "robot")
-        })
+        self.processes
+            .iter()
+            .any(|p| p.bridge_side() == Some("robot"))
     }
 
     /// Whether physics and the estimator run under another supervisor, reached through this
@@ -566,13 +596,9 @@ impl LaunchConfig {
     /// --side planner` written out): that supervisor runs the judge beside physics and owns
     /// a live session's goals, and this one relays the goals its planner ends to it.
     pub fn robot_is_remote(&self) -> bool {
-        self.processes.iter().any(|p| {
-            p.exec.file_name().is_some_and(|n| n == "agp")
-                && p.args.first().is_some_and(|a| a == "bridge")
-                && p.args
-                    .windows(2)
-                    .any(|w| w[0] == "--side" && w[1] == "planner")
-        })
+        self.processes
+            .iter()
+            .any(|p| p.bridge_side() == Some("planner"))
     }
 
     /// Reads and validates the launch file at `path`: a regular file (a FIFO or a link to
@@ -1383,6 +1409,27 @@ mod tests {
     /// remote checks (the bridge's are the supervisor's).
     fn new_fixture() -> Fixture {
         Fixture::new(&["bin/agp-fake", "tools/my-planner"], None)
+    }
+
+    #[test]
+    fn a_bridge_is_agp_bridge_or_agp_bridge_written_out_and_its_side_is_its_side_flag() {
+        let args = |a: &[&str]| a.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+        let agp = Path::new("/opt/agp/bin/agp");
+        let bridge = Path::new("/opt/agp/bin/agp-bridge");
+        let planner_side = args(&["bridge", "--side", "planner", "--connect", "tls/h:7447"]);
+        assert_eq!(bridge_side(agp, &planner_side), Some("planner"));
+        assert_eq!(
+            bridge_side(bridge, &args(&["--side", "robot", "--insecure"])),
+            Some("robot")
+        );
+        assert!(is_bridge(agp, &args(&["bridge", "keygen", "keys"])));
+        assert_eq!(bridge_side(agp, &args(&["bridge", "keygen", "keys"])), None);
+        // Not a bridge: `agp` doing something else, or another program with a `--side`.
+        assert!(!is_bridge(agp, &args(&["up", "launch.toml"])));
+        assert_eq!(
+            bridge_side(Path::new("/opt/agp/bin/agp-planner"), &planner_side),
+            None
+        );
     }
 
     #[test]

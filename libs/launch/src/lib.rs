@@ -7,5 +7,5 @@ pub use launch_config::{
     BUILTIN_SCENARIOS, CONTEXT_ENV, ClockConfig, ClockMode, DEFAULT_RATE_HZ, DEFAULT_STOP_GRACE,
     ExitDecision, LaunchConfig, LaunchConfigParseError, LaunchFault, LaunchFaultKind,
     LaunchOptions, LearnMode, MAX_RESTART_DELAY, ProcessConfig, RECORDER_PROCESS, RemoteChecks,
-    RestartConfig, RestartPolicy, ScenarioSource,
+    RestartConfig, RestartPolicy, ScenarioSource, bridge_side, is_bridge,
 };

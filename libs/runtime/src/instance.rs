@@ -661,6 +661,18 @@ fn is_transient_ev(e: &EventOpenOrCreateError) -> bool {
 pub type ControlService =
     request_response::PortFactory<AgpIpc, ControlRequest, (), ControlResponse, ()>;
 
+/// Why [`Instance::running`] found no running instance of that name.
+#[derive(Debug, thiserror::Error)]
+pub enum RunningInstanceError {
+    #[error("bad instance name `{name}`: {why}")]
+    BadName {
+        name: String,
+        why: InstanceNameError,
+    },
+    #[error("no supervisor runs instance `{0}` (start it with `agp up`)")]
+    NotRunning(String),
+}
+
 /// Why the control service could not be reached.
 #[derive(Debug, thiserror::Error)]
 pub enum ControlOpenError {
@@ -687,6 +699,19 @@ impl Instance {
             .map_err(|e| ControlOpenError::Create(format!("{e:?}")))
     }
 
+    /// The instance named `name`, which a supervisor must run (its control service is up):
+    /// what a client of a running instance (`agp record`, a bridge) opens first.
+    pub fn running(name: &str) -> Result<Self, RunningInstanceError> {
+        let instance = Self::new(name).map_err(|why| RunningInstanceError::BadName {
+            name: name.to_owned(),
+            why,
+        })?;
+        if !instance.control_exists() {
+            return Err(RunningInstanceError::NotRunning(name.to_owned()));
+        }
+        Ok(instance)
+    }
+
     /// Whether the supervisor has created the control service, asked without a node: a
     /// client that made one before the supervisor has cleaned the instance's leftovers
     /// would be a stranger it must wait for.
@@ -706,5 +731,23 @@ impl Instance {
             .request_response::<ControlRequest, ControlResponse>()
             .open()
             .map_err(|_| ControlOpenError::NotRunning(self.name().to_owned()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_instance_no_supervisor_runs_is_not_running_and_a_bad_name_is_refused() {
+        let name = format!("not-running-{}", std::process::id());
+        assert!(matches!(
+            Instance::running(&name),
+            Err(RunningInstanceError::NotRunning(n)) if n == name
+        ));
+        assert!(matches!(
+            Instance::running("Not.A.Name"),
+            Err(RunningInstanceError::BadName { .. })
+        ));
     }
 }

@@ -26,7 +26,8 @@ pub fn quiet_iceoryx2() {
 }
 pub use instance::{
     ControlOpenError, ControlService, Instance, InstanceDirError, InstanceNameError,
-    MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, TAP_DEPTH, Topic, instance_files_in,
+    MAX_INSTANCE_NAME_LEN, OpenError, ROOT_ENV, RunningInstanceError, TAP_DEPTH, Topic,
+    instance_files_in,
 };
 pub use instance_lock::{InstanceLock, InstanceLockError};
 pub use service::{AgpIpc, EVENT_ID_MAX_VALUE, PooledGuard, PooledRc};

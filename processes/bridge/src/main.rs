@@ -343,7 +343,7 @@ fn run(args: &BridgeArgs) -> Result<u8> {
         eprintln!("{}", insecure_warning(endpoint.locator()));
     }
     let topics = parse_topics(&args.topics)?;
-    let instance = running_instance(instance_name)?;
+    let instance = Instance::running(instance_name)?;
     let key = SessionKey::from_env().map_err(|e| anyhow!(e))?;
     let config = BridgeConfig {
         side,
@@ -411,15 +411,6 @@ fn run(args: &BridgeArgs) -> Result<u8> {
         return Ok(EXIT_FAR_GONE);
     }
     Ok(0)
-}
-
-/// The instance named `name`, which a supervisor must run (its control service is up).
-fn running_instance(name: &str) -> Result<Instance> {
-    let instance = Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))?;
-    if !instance.control_exists() {
-        bail!("no supervisor runs instance `{name}` (start it with `agp up`)");
-    }
-    Ok(instance)
 }
 
 fn main() -> ExitCode {

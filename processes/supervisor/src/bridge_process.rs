@@ -46,8 +46,9 @@ pub(crate) struct RunningBridge {
     pub wait: WaitStrategy,
 }
 
-/// The bridge of a running process `pid`, if it is one (`agp-bridge`, which `agp bridge`
-/// becomes).
+/// The bridge of a running process `pid`, if it is one: `agp-bridge`, which `agp bridge`
+/// becomes by exec before it does anything (an `agp bridge` that could not exec has exited
+/// saying why).
 pub(crate) fn bridge_of_process(pid: u32) -> Option<RunningBridge> {
     let words = |file: &str| -> Option<Vec<String>> {
         let bytes = std::fs::read(format!("/proc/{pid}/{file}")).ok()?;
@@ -61,8 +62,7 @@ pub(crate) fn bridge_of_process(pid: u32) -> Option<RunningBridge> {
     let args = words("cmdline")?;
     let is_bridge = args
         .first()
-        .is_some_and(|a| Path::new(a).file_name().is_some_and(|n| n == "agp-bridge"))
-        || args.get(1).map(String::as_str) == Some("bridge");
+        .is_some_and(|a| Path::new(a).file_name().is_some_and(|n| n == "agp-bridge"));
     if !is_bridge {
         return None;
     }

@@ -33,15 +33,6 @@ pub fn instance_named(name: &str) -> Result<Instance> {
     Instance::new(name).map_err(|e| anyhow!("bad instance name `{name}`: {e}"))
 }
 
-/// The instance named `name`, which a supervisor must run (its control service is up).
-pub fn running_instance(name: &str) -> Result<Instance> {
-    let instance = instance_named(name)?;
-    if !instance.control_exists() {
-        bail!("no supervisor runs instance `{name}` (start it with `agp up`)");
-    }
-    Ok(instance)
-}
-
 impl InstanceArg {
     /// `--instance`, else the launch file's.
     pub fn name(&self) -> Result<String> {

@@ -43,11 +43,10 @@ pub fn build_the_bridge_hint(agp: &std::path::Path) -> String {
 }
 
 /// Why process `p` of a plan cannot start, if it is an `agp bridge` and `agp-bridge` is
-/// not built beside its `agp`.
+/// not built beside its `agp` (an `agp-bridge` written out is its own executable, which
+/// the launch file's checks found).
 fn missing_bridge(p: &agp_launch::ProcessConfig) -> Option<String> {
-    let is_bridge = p.exec.file_name().is_some_and(|n| n == "agp")
-        && p.args.first().is_some_and(|a| a == "bridge");
-    (is_bridge && !bridge_binary(&p.exec).is_file()).then(|| build_the_bridge_hint(&p.exec))
+    (p.is_bridge() && !bridge_binary(&p.exec).is_file()).then(|| build_the_bridge_hint(&p.exec))
 }
 
 /// The checks of a launch file's plan that start processes.

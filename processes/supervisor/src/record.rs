@@ -52,7 +52,7 @@ pub(crate) fn run(args: &RecordArgs) -> Result<u8> {
     {
         bail!("--seconds must be more than 0 and at most 86400, got {s}");
     }
-    let instance = crate::control::running_instance(&args.instance)?;
+    let instance = agp_runtime::Instance::running(&args.instance)?;
     let info = run_info(args)?;
     let options = RecorderOptions {
         run: info.to_metadata(),

@@ -184,10 +184,7 @@ pub(crate) fn spawn_process(
     // epoch's token, so physics applies commands of the processes this supervisor started
     // only.
     let key = run_session_key()?;
-    let planner_side_bridge = exec.file_name().is_some_and(|n| n == "agp")
-        && args
-            .windows(2)
-            .any(|w| w[0] == "--side" && w[1] == "planner");
+    let planner_side_bridge = agp_launch::bridge_side(exec, args) == Some("planner");
     if exec.file_name().is_some_and(|n| n == "agp-physics") || planner_side_bridge {
         cmd.env(agp_shared_types::SESSION_KEY_ENV, key.to_hex())
             .env_remove(agp_shared_types::SESSION_TOKEN_ENV);
