@@ -5,6 +5,7 @@ against the link's Zenoh floor measured in the same run.
     python3 tools/bench_bridge_profile.py [--bin target/release] [--rounds 5] [--seconds 5]
                                           [--floor-seconds 2] [--ag results/triangle.ag]
                                           [--out results/bridge-profile] [--against DIR] [--trace]
+                                          [--vary-env K=V] [--env K=V]
 
 Each round runs, for each transport (TLS, then plain TCP): two lockstep live sessions on
 this machine joined over the loopback by `agp bridge` (physics and the estimator in the
@@ -15,7 +16,8 @@ floor (a bare Zenoh ping-pong between two `agp` processes on the bridge's transp
 sets each bridged hop (estimator->planner, planner->physics) against the link floor's p50.
 
 Prints one line per run and, at the end, the medians over the rounds per transport, with
-the machine's load average (1 min) beside them. JSON of every run goes under --out.
+the machine's load average (1 min) beside them, each round's ratios, and (--trace) the
+medians of where the hops' time went. JSON of every run goes under --out.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import socket
 import statistics
 import subprocess
@@ -103,9 +106,43 @@ def one_run(bin_dir: Path, out: Path, ag: Path, keys: Path, tls: bool, k: int, a
     finally:
         agp(bin_dir, "down", "--instance", robot, check=False)
     if args.trace:
-        for l in trace_lines(out, robot, planner):
+        lines = trace_lines(out, robot, planner)
+        for l in lines:
             print(f"  {tag}: {l}", flush=True)
+        result["trace_p50_us"] = trace_points(lines)
     return result
+
+
+TRACE_LINE = re.compile(r"agp bridge trace \((\w+) side, (\w+)\), (\S+) since published: (.*)")
+TRACE_POINT = re.compile(r"(\w+) p50 ([\d.]+) us")
+# The points of a hop in its order, per traced topic: the sending end's, then the far end's.
+TRACED = {"agp/estimates": "estimate", "agp/motor_commands": "command"}
+POINTS = ["woke", "put", "arrived", "republished"]
+
+
+def trace_points(lines: list[str]) -> dict:
+    """`{"estimate woke": p50 us, ...}` from the bridges' trace lines of one run: how long after
+    its publisher stamped it an estimate or a command reached each point of its hop."""
+    got = {}
+    for l in lines:
+        m = TRACE_LINE.search(l)
+        if not m or m.group(3) not in TRACED:
+            continue
+        for name, p50 in TRACE_POINT.findall(m.group(4)):
+            got[f"{TRACED[m.group(3)]} {name}"] = float(p50)
+    return got
+
+
+def trace_line(r: list[dict]) -> str:
+    """The medians over runs `r` of each trace point's p50, estimate then command."""
+    parts = []
+    for what in TRACED.values():
+        vals = []
+        for p in POINTS:
+            xs = [x["trace"][f"{what} {p}"] for x in r if f"{what} {p}" in x["trace"]]
+            vals.append(f"{statistics.median(xs):.1f}" if xs else "-")
+        parts.append(f"{what} {', '.join(vals)}")
+    return "trace p50 us since published (woke, put, arrived, republished): " + "; ".join(parts)
 
 
 def figures(j: dict) -> dict:
@@ -118,6 +155,7 @@ def figures(j: dict) -> dict:
         "link_floor": link.get("p50_ns", float("nan")) / 1e3,
         **{h: hops.get(h, float("nan")) for h in ["physics->estimator", *BRIDGED]},
         **{f"{h} ratio": (link.get("hops_ratio_to_link_floor_p50") or {}).get(h) or float("nan") for h in BRIDGED},
+        "trace": j.get("trace_p50_us") or {},
     }
 
 
@@ -147,6 +185,9 @@ def main() -> int:
     ap.add_argument("--trace", action="store_true",
                     help="set AGP_BRIDGE_TRACE for both bridges and print where their hops' time went (over the whole run, "
                          "the placement and the floors' pause included), after each run")
+    ap.add_argument("--vary-env", metavar="K=V",
+                    help="run every build a second time in each round with K=V set for every agp process, "
+                         "interleaved (e.g. AGP_WAIT=block: the pipeline blocking against its default waiting)")
     ap.add_argument("--env", action="append", default=[], metavar="K=V",
                     help="set for every agp process (both supervisors, so every pipeline process and bridge, and the profiler), e.g. AGP_WAIT=block")
     args = ap.parse_args()
@@ -163,22 +204,34 @@ def main() -> int:
     if not keys.exists():
         agp(bin_dir, "bridge", "keygen", str(keys))
     transports = [t for t in ["tls", "tcp"] if args.only in (None, t)]
-    builds = [("", bin_dir)]
+    # Each entry: (label, binaries, extra environment); all of them run once per round and
+    # transport, one after the other, so they meet the same conditions.
+    builds = [("", bin_dir, {})]
     if args.against:
-        builds.insert(0, ("against ", Path(args.against).resolve()))
-    runs: dict[tuple[str, str], list[dict]] = {(b, t): [] for b, _ in builds for t in transports}
+        builds.insert(0, ("against ", Path(args.against).resolve(), {}))
+    if args.vary_env:
+        k, _, v = args.vary_env.partition("=")
+        builds += [(f"{k}={v} " + b, bins, {k: v}) for b, bins, _ in list(builds)]
+    runs: dict[tuple[str, str], list[dict]] = {(b, t): [] for b, _, _ in builds for t in transports}
+    base_env = dict(ENV)
     for k in range(args.rounds):
         for tag in transports:
-            for build, bins in builds:
+            for build, bins, extra in builds:
+                ENV.clear()
+                ENV.update(base_env, **extra)
                 f = figures(one_run(bins, out, ag, keys, tag == "tls", k, args))
                 runs[(build, tag)].append(f)
                 print(build + line(tag, f), flush=True)
     print(f"\nmedians over {args.rounds} rounds ({args.seconds} s sampled, {args.floor_seconds} s per floor){' with ' + ' '.join(args.env) if args.env else ''}:")
-    for build, bins in builds:
+    for build, bins, _ in builds:
         for tag in transports:
             r = runs[(build, tag)]
-            med = {key: statistics.median(x[key] for x in r) for key in r[0]}
+            med = {key: statistics.median(x[key] for x in r) for key in r[0] if key != "trace"}
             print(build + line(tag, med) + f"  [load {min(x['load'] for x in r):.1f}-{max(x['load'] for x in r):.1f}] ({bins})")
+            print(f"{build}{tag:<4} rounds: " + "  ".join(
+                f"{h} " + " / ".join(f"{x[h + ' ratio']:.2f}x" for x in r) for h in BRIDGED))
+            if args.trace:
+                print(f"{build}{tag:<4} {trace_line(r)}")
     return 0
 
 
