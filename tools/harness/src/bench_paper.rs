@@ -64,11 +64,12 @@ pub struct BenchPaperArgs {
     #[arg(long)]
     pub check: bool,
     /// Task pipelines at once over the whole run, each on a core of its own. Above 1 (the
-    /// default: the machine's cores) each seed's trajectory and placement benchmarks run as
-    /// `agp bench` child processes side by side (their output in the seed's folder,
-    /// `<benchmark>.log`, shown as each ends), the next seed learning meanwhile, all of
-    /// them sharing the N pipelines; 1 runs one benchmark after the other in this process.
-    /// The figures are the same either way; only the wall times differ.
+    /// default: the machine's cores) every seed learns first, then every seed's trajectory
+    /// and placement benchmarks run as `agp bench` child processes side by side (their
+    /// output in the seed's folder, `<benchmark>.log`, shown as each ends), sharing the N
+    /// pipelines, the (seed, planner) pair of most expected work first; 1 runs one
+    /// benchmark after the other in this process. The figures are the same either way;
+    /// only the wall times differ.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub jobs: Option<u64>,
 }
@@ -298,11 +299,15 @@ fn push_outputs(argv: &mut Vec<String>, json: Option<&Path>, plot: Option<&Path>
 }
 
 impl SeedTasks {
-    /// Learns `seed` here, then starts its trajectory and placements as child processes
-    /// sharing the pipelines' slots in `slots`.
-    fn start(args: &BenchPaperArgs, seed: u64, dir: PathBuf, slots: &Path) -> Result<Self> {
-        let started = Instant::now();
-        let learn = learn_seed(seed, &dir)?;
+    /// Starts the trajectory and placements of `seed` (learned into `dir` from `started`
+    /// on, its learning's document `learn`) as child processes sharing the pipelines' slots
+    /// in `slots`.
+    fn start(
+        args: &BenchPaperArgs,
+        seed: u64,
+        (dir, started, learn): (PathBuf, Instant, Value),
+        slots: &Path,
+    ) -> Result<Self> {
         let exe = std::env::current_exe().context("cannot find the running `agp` executable")?;
         let mut commands = vec![(
             "trajectory".to_owned(),
@@ -420,9 +425,12 @@ impl SeedTasks {
     }
 }
 
-/// The seeds of this run with their tasks side by side ([`BenchPaperArgs::jobs`]): each seed
-/// learns here, then its three task benchmarks start as child processes; the children of
-/// every seed share `jobs` pipeline slots (one core each). The seeds' documents, in order.
+/// The seeds of this run with their tasks side by side ([`BenchPaperArgs::jobs`]): every
+/// seed learns here first (its four objects side by side on the cores), then the three
+/// task benchmarks of every seed start at once as child processes, sharing `jobs` pipeline
+/// slots (one core each), the (benchmark, seed, planner) pair of most expected work taking
+/// each slot that frees (`pipeline_bench`'s queue): nothing learns beside the pipelines,
+/// and the pairs that end the run are short ones. The seeds' documents, in order.
 fn run_seeds_side_by_side(
     args: &BenchPaperArgs,
     seeds: &[u64],
@@ -441,14 +449,18 @@ fn run_seeds_side_by_side(
     let _checked = stop::checked();
     let mut running: Vec<SeedTasks> = Vec::with_capacity(seeds.len());
     let outcome = (|| -> Result<()> {
+        let mut learned = Vec::with_capacity(seeds.len());
         for &seed in seeds {
             if stop::requested() {
                 bail!("interrupted");
             }
-            running.push(SeedTasks::start(args, seed, dir_of(seed), slots.path())?);
-            for s in &mut running {
-                s.poll()?;
-            }
+            let started = Instant::now();
+            let dir = dir_of(seed);
+            let learn = learn_seed(seed, &dir)?;
+            learned.push((seed, (dir, started, learn)));
+        }
+        for (seed, learning) in learned {
+            running.push(SeedTasks::start(args, seed, learning, slots.path())?);
         }
         while running.iter().any(|s| s.finished.is_none()) {
             if stop::requested() {

@@ -20,7 +20,7 @@ use agp_world::{RobotDescription, Scenario};
 use anyhow::{Context, Result, bail};
 
 use crate::bench_learn;
-use crate::pipeline_bench::PipelineBench;
+use crate::pipeline_bench::{PipelineBench, SLOTS_ENV};
 use crate::side_by_side::side_by_side;
 use crate::stop;
 use crate::task_plot::{Overlay, Panel, plot_runs};
@@ -131,11 +131,14 @@ impl<'a> Runner<'a> {
     /// with `seed`, so its results do not depend on what ran before it. Over the pipeline
     /// its instance is `bench-<pid>-<tag>`: short (iceoryx2's socket paths), and telling
     /// apart the pipelines that run at once.
+    /// `cost`: the pair's expected work ([`expected_sim_s`] summed over its episodes), its
+    /// place in the queue when pipelines share slots.
     pub(crate) fn start_tagged(
         plan: &EpisodePlan<'a>,
         planner: PlannerKind,
         seed: u64,
         tag: &str,
+        cost: u64,
     ) -> Result<Self> {
         let EpisodePlan {
             in_process,
@@ -151,6 +154,7 @@ impl<'a> Runner<'a> {
                 scenario_arg,
                 seed,
                 tag,
+                cost,
             )?));
         }
         if in_process {
@@ -173,6 +177,7 @@ impl<'a> Runner<'a> {
                 ag,
                 seed,
                 tag,
+                cost,
             )?))
         }
     }
@@ -279,13 +284,14 @@ pub(crate) fn run_episodes(
         let finished = done.iter().map(|(r, _)| r.len()).sum();
         progress(&view, finished);
     };
-    side_by_side(work, |&(seed, planner)| -> Result<PairRun> {
-        let index = work
-            .iter()
-            .position(|&w| w == (seed, planner))
-            .unwrap_or(0);
+    let run_pair = |&(seed, planner): &(u64, PlannerKind)| -> Result<PairRun> {
+        let index = work.iter().position(|&w| w == (seed, planner)).unwrap_or(0);
         let started = Instant::now();
         let tasks = episodes(seed);
+        let cost: f64 = tasks
+            .iter()
+            .map(|(_, task, _)| expected_sim_s(planner, task))
+            .sum();
         let mut results = Vec::with_capacity(tasks.len());
         if stop::requested() {
             return Ok(PairRun {
@@ -294,7 +300,7 @@ pub(crate) fn run_episodes(
             });
         }
         let tag = instance_tag(planner, seed, plan.several_seeds);
-        let mut runner = match Runner::start_tagged(plan, planner, seed, &tag) {
+        let mut runner = match Runner::start_tagged(plan, planner, seed, &tag, cost as u64) {
             Ok(r) => r,
             Err(_) if stop::requested() => {
                 return Ok(PairRun {
@@ -342,9 +348,47 @@ pub(crate) fn run_episodes(
             results,
             wall_s: started.elapsed().as_secs_f64(),
         })
-    })
-    .into_iter()
-    .collect()
+    };
+    let shared_slots = !plan.in_process && std::env::var_os(SLOTS_ENV).is_some();
+    let outcomes = if shared_slots {
+        // The slots bound the pipelines at once, over every bench sharing them: each pair
+        // waits in their queue at once, the one of most work taking the next free slot.
+        std::thread::scope(|scope| {
+            let run_pair = &run_pair;
+            let pairs: Vec<_> = work
+                .iter()
+                .map(|w| scope.spawn(move || run_pair(w)))
+                .collect();
+            pairs
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                .collect::<Vec<_>>()
+        })
+    } else {
+        side_by_side(work, run_pair)
+    };
+    outcomes.into_iter().collect()
+}
+
+/// The simulated seconds an episode of `task` typically takes with `planner`: what ranks
+/// the (seed, planner) pairs waiting for a pipeline slot ([`PipelineBench::start`]). A
+/// pinned pipeline's CPU time goes with its simulated time, at 11.6-12.9 ms a simulated
+/// second for every planner and both tasks (`agp bench paper --seeds 5`, release, 8ff68ca,
+/// the pairs no learning ran beside), so simulated seconds rank the pairs by their CPU
+/// time. The figures: each planner's mean per episode (per path of the trajectory set) on
+/// the tuning seeds, `agp bench paper` on seeds 1-4 (2026-11-27); that run had no model
+/// planner, whose figures come from the 8ff68ca run (0.9 x the oracle's simulated time in
+/// the placements, 138 s a path). Only the order in which pairs start depends on them,
+/// never a result.
+pub(crate) fn expected_sim_s(planner: PlannerKind, task: &Task) -> f64 {
+    match (task, planner) {
+        (Task::Trajectory { .. }, PlannerKind::Affordance) => 530.0,
+        (Task::Trajectory { .. }, PlannerKind::Baseline) => 185.0,
+        (Task::Trajectory { .. }, PlannerKind::Oracle | PlannerKind::Model) => 140.0,
+        (Task::Place { .. }, PlannerKind::Affordance) => 140.0,
+        (Task::Place { .. }, PlannerKind::Baseline) => 100.0,
+        (Task::Place { .. }, PlannerKind::Oracle | PlannerKind::Model) => 53.0,
+    }
 }
 
 /// The instance tag of `planner`'s pipeline: three letters, and the seed when several

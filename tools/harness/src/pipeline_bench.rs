@@ -93,11 +93,13 @@ impl CoreLease {
     /// Where a new pipeline runs. With [`SLOTS_ENV`] it waits for a free slot (its core:
     /// the slot's number modulo the cores); without, it takes the core with the fewest of
     /// this process's pipelines. `Ok(None)`: anywhere (pinning off, one core, no slots).
-    fn take() -> Result<Option<Self>> {
+    /// `cost` (the pipeline's expected work) and `tag` (its name among this process's
+    /// pipelines) place it in the slots' queue ([`take_slot`]).
+    fn take(cost: u64, tag: &str) -> Result<Option<Self>> {
         let cpus = allowed_cpus();
         let pinning = pinning_wanted() && cpus.len() > 1;
         if let Some(dir) = std::env::var_os(SLOTS_ENV) {
-            let (k, file) = take_slot(Path::new(&dir))?;
+            let (k, file) = take_slot(Path::new(&dir), cost, tag)?;
             return Ok(Some(Self {
                 counted: None,
                 _slot: Some(file),
@@ -153,9 +155,91 @@ impl Drop for CoreLease {
     }
 }
 
-/// Waits until one of the slot files `slot-0`, `slot-1`, ... in `dir` can be locked; its
-/// number and the locked file. Gives up at a shutdown request.
-fn take_slot(dir: &Path) -> Result<(usize, std::fs::File)> {
+/// How often the waiting pipeline of most work looks for a free slot.
+const HEAD_POLL: Duration = Duration::from_millis(20);
+/// How often the other waiting pipelines look whether they now have the most work: a slot
+/// freed only every ten seconds or so (a pipeline's episodes take 10-40 s).
+const QUEUE_POLL: Duration = Duration::from_millis(250);
+
+/// A pipeline waiting for a slot, as the others see it: the file
+/// `wait-<cost, 12 digits>-<pid>-<tag>` in the slots' folder, locked (flock) while its
+/// owner lives, removed when the pipeline has its slot or gives up. The file's name orders
+/// the waiters: most work first (ties: the larger name).
+struct Waiting {
+    path: PathBuf,
+    name: String,
+    _lock: std::fs::File,
+}
+
+impl Waiting {
+    /// Enters the queue of `dir`. The file is locked under a name no other waiter reads and
+    /// only then renamed into the queue, so a waiter that finds a `wait-` file it can lock
+    /// knows its owner is gone.
+    fn enter(dir: &Path, cost: u64, tag: &str) -> Result<Self> {
+        use std::os::fd::AsRawFd;
+        let pid = std::process::id();
+        let name = format!("wait-{cost:012}-{pid}-{tag}");
+        let draft = dir.join(format!("draft-{pid}-{tag}"));
+        let file = std::fs::File::create(&draft)
+            .with_context(|| format!("cannot create {}", draft.display()))?;
+        // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            bail!(
+                "cannot lock {}: {}",
+                draft.display(),
+                std::io::Error::last_os_error()
+            );
+        }
+        let path = dir.join(&name);
+        std::fs::rename(&draft, &path)
+            .with_context(|| format!("cannot rename {} to {name}", draft.display()))?;
+        Ok(Self {
+            path,
+            name,
+            _lock: file,
+        })
+    }
+
+    /// Whether a live pipeline of more work (a larger name) waits in `dir`; the files of
+    /// waiters that died are removed on the way.
+    fn behind_another(&self, dir: &Path) -> Result<bool> {
+        use std::os::fd::AsRawFd;
+        let entries =
+            std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
+        for entry in entries.flatten() {
+            let name = entry.file_name();
+            let Some(name) = name.to_str() else { continue };
+            if !name.starts_with("wait-") || name <= self.name.as_str() {
+                continue;
+            }
+            // Gone already: it took its slot.
+            let Ok(file) = std::fs::File::open(entry.path()) else {
+                continue;
+            };
+            // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
+            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+                return Ok(true);
+            }
+            // Its owner died waiting (or took its slot just now: then the name is gone).
+            let _ = std::fs::remove_file(entry.path());
+        }
+        Ok(false)
+    }
+}
+
+impl Drop for Waiting {
+    fn drop(&mut self) {
+        // Removed before the lock goes with the file (fields drop after this).
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Waits until one of the slot files `slot-0`, `slot-1`, ... in `dir` can be locked and no
+/// live pipeline of more expected work (`cost`) waits for one; its number and the locked
+/// file. Longest first: the pipelines of a run sharing the slots (`agp bench paper
+/// --jobs N`) are scheduled by their expected work, so that no long one starts last and
+/// leaves the other cores idle while it ends. Gives up at a shutdown request.
+fn take_slot(dir: &Path, cost: u64, tag: &str) -> Result<(usize, std::fs::File)> {
     use std::os::fd::AsRawFd;
     let mut count = 0;
     while dir.join(format!("slot-{count}")).is_file() {
@@ -164,7 +248,15 @@ fn take_slot(dir: &Path) -> Result<(usize, std::fs::File)> {
     if count == 0 {
         bail!("{SLOTS_ENV}={}: no slot file `slot-0` there", dir.display());
     }
+    let waiting = Waiting::enter(dir, cost, tag)?;
     loop {
+        if agp_runtime::shutdown_requested() {
+            bail!("interrupted");
+        }
+        if waiting.behind_another(dir)? {
+            std::thread::sleep(QUEUE_POLL);
+            continue;
+        }
         for k in 0..count {
             let path = dir.join(format!("slot-{k}"));
             let file = std::fs::File::open(&path)
@@ -174,10 +266,7 @@ fn take_slot(dir: &Path) -> Result<(usize, std::fs::File)> {
                 return Ok((k, file));
             }
         }
-        if agp_runtime::shutdown_requested() {
-            bail!("interrupted");
-        }
-        std::thread::sleep(Duration::from_millis(20));
+        std::thread::sleep(HEAD_POLL);
     }
 }
 
@@ -215,17 +304,25 @@ pub struct PipelineBench {
 impl PipelineBench {
     /// Starts physics (seeded with `seed`) and the estimator, serving `ag`'s gradients if
     /// given, under the instance `bench-<pid>-<tag>` (`tag`: lowercase letters, digits,
-    /// `-`, `_`; one per pipeline running at once).
-    pub fn start(scenario_arg: &str, ag: Option<&Path>, seed: u64, tag: &str) -> Result<Self> {
-        Self::launch(scenario_arg, ag, false, seed, tag)
+    /// `-`, `_`; one per pipeline running at once). With [`SLOTS_ENV`] it first waits for
+    /// a slot, the waiting pipeline of most expected work `cost` first (any unit, the same
+    /// for every pipeline sharing the slots; the task benches use simulated seconds).
+    pub fn start(
+        scenario_arg: &str,
+        ag: Option<&Path>,
+        seed: u64,
+        tag: &str,
+        cost: u64,
+    ) -> Result<Self> {
+        Self::launch(scenario_arg, ag, false, seed, tag, cost)
     }
 
     /// As [`PipelineBench::start`], for an object never pushed before: no AG file; each
     /// episode starts with a fresh estimator that builds its gradient from the contact
     /// prior of the episode's first circling and learns on from the episode's pushes
     /// (issue 33), and the affordance planner plans on what it publishes.
-    pub fn start_online(scenario_arg: &str, seed: u64, tag: &str) -> Result<Self> {
-        Self::launch(scenario_arg, None, true, seed, tag)
+    pub fn start_online(scenario_arg: &str, seed: u64, tag: &str, cost: u64) -> Result<Self> {
+        Self::launch(scenario_arg, None, true, seed, tag, cost)
     }
 
     /// The estimator of this pipeline: serving `ag`, learning online from the prior, or
@@ -256,6 +353,7 @@ impl PipelineBench {
         online: bool,
         seed: u64,
         tag: &str,
+        cost: u64,
     ) -> Result<Self> {
         let scenario = Scenario::resolve(scenario_arg)?;
         let name = format!("bench-{}-{tag}", std::process::id());
@@ -265,7 +363,7 @@ impl PipelineBench {
             .remove_files()
             .context("cannot clear the bench's instance files")?;
         let logs = tempfile::tempdir().context("cannot create a folder for the episode logs")?;
-        let core = CoreLease::take()?;
+        let core = CoreLease::take(cost, tag)?;
         let mut cmd = Command::new(sibling_executable("agp-physics")?);
         pin(core.as_ref(), &mut cmd);
         cmd.args(["--instance", &name, "--scenario", scenario_arg])
@@ -539,15 +637,15 @@ mod tests {
         for k in 0..2 {
             std::fs::File::create(dir.path().join(format!("slot-{k}"))).expect("slot file");
         }
-        let (first, held) = take_slot(dir.path()).expect("a free slot");
-        let (second, _held_too) = take_slot(dir.path()).expect("the other slot");
+        let (first, held) = take_slot(dir.path(), 10, "a").expect("a free slot");
+        let (second, _held_too) = take_slot(dir.path(), 10, "b").expect("the other slot");
         assert_eq!(
             (first, second),
             (0, 1),
             "two pipelines, two different slots"
         );
         drop(held);
-        let (again, _) = take_slot(dir.path()).expect("the slot given back");
+        let (again, _) = take_slot(dir.path(), 10, "c").expect("the slot given back");
         assert_eq!(
             again, 0,
             "a finished pipeline's slot is taken by the next one"
@@ -555,9 +653,41 @@ mod tests {
     }
 
     #[test]
+    fn of_the_pipelines_waiting_for_a_slot_the_one_of_most_work_goes_first() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let small = Waiting::enter(dir.path(), 5, "small").expect("in the queue");
+        let big = Waiting::enter(dir.path(), 900, "big").expect("in the queue");
+        assert!(small.behind_another(dir.path()).expect("the queue read"));
+        assert!(!big.behind_another(dir.path()).expect("the queue read"));
+        drop(big);
+        assert!(
+            !small.behind_another(dir.path()).expect("the queue read"),
+            "the big one left the queue (it has its slot)"
+        );
+    }
+
+    #[test]
+    fn a_waiter_that_died_holds_up_nobody_and_its_file_is_removed() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        // Its file is there, unlocked: its process is gone.
+        let dead = dir.path().join("wait-000000009999-1-dead");
+        std::fs::File::create(&dead).expect("the dead waiter's file");
+        let me = Waiting::enter(dir.path(), 5, "me").expect("in the queue");
+        assert!(!me.behind_another(dir.path()).expect("the queue read"));
+        assert!(!dead.exists(), "the dead waiter's file is removed");
+        drop(me);
+        let left: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("the folder read")
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert!(left.is_empty(), "a waiter leaves no file: {left:?}");
+    }
+
+    #[test]
     fn a_slot_folder_without_slot_files_is_refused_by_name() {
         let dir = tempfile::tempdir().expect("a temporary folder");
-        let err = take_slot(dir.path()).expect_err("no slot to take");
+        let err = take_slot(dir.path(), 10, "a").expect_err("no slot to take");
         assert!(err.to_string().contains("slot-0"), "{err}");
     }
 }
