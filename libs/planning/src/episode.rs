@@ -1532,6 +1532,7 @@ impl<W: World> Episode<'_, '_, W> {
             return Ok(None);
         }
         let match_before = self.run.world.perceived().match_seq;
+        let grids_before = self.run.world.perceived().grids_seq;
         if !self.run.circle()? {
             self.trace(format_args!("circling failed"));
             return Ok(None);
@@ -1549,8 +1550,9 @@ impl<W: World> Episode<'_, '_, W> {
         match &mut self.brain {
             Brain::Awaiting => {
                 // The estimator builds the prior from this circling and publishes it as a
-                // newer set; its estimates say so from the frame after (a second at most).
-                let seq = p.grids_seq;
+                // newer set; its estimates say so from the frame after the circling's end
+                // at the latest (a second at most).
+                let seq = grids_before;
                 let mut frames = 0;
                 while self.run.world.perceived().grids_seq == seq && frames < 640 {
                     self.run.step(0.0, 0.0)?;

@@ -163,13 +163,13 @@ fn run() -> Result<()> {
         estimator.report(LearnReport {
             kind: LearnReportKind::Learned as u32,
             valid: 1,
-            grids_seq: estimator.grids_seq,
+            grids_seq: estimator.state.grids_seq,
             ..LearnReport::default()
         })?;
         println!(
             "agp-estimator: published the gradients of {} (grids seq {})",
             path.display(),
-            estimator.grids_seq
+            estimator.state.grids_seq
         );
     }
     let idle = (args.idle_timeout_s > 0).then(|| Duration::from_secs(args.idle_timeout_s));
@@ -214,7 +214,6 @@ fn run() -> Result<()> {
         if let Some(gradient) = estimator.state.finished.take() {
             estimator.finish(&gradient)?;
         }
-        estimator.republish_learned()?;
         if let Some(failed) = estimator.save_failed.take() {
             // The planner has the `Learned` report saying so; give it a moment to read it
             // before this process (and its publishers) goes.
@@ -229,13 +228,7 @@ struct Estimator {
     _node: Node<AgpIpc>,
     waiter: Waiter,
     state: State,
-    grids: Publisher<AgpIpc, GradientGrid, ()>,
-    grids_wake: Notifier<AgpIpc>,
-    grids_seq: u64,
-    /// The tracker's gradient generation last published (online learning).
-    published_generation: u64,
     results: PathBuf,
-    object: String,
     /// Set when the AG file could not be saved: the process ends with this error.
     save_failed: Option<anyhow::Error>,
 }
@@ -253,7 +246,14 @@ struct State {
     report_seq: u64,
     /// Set when the planner said learning is done: the gradient to publish and save.
     finished: Option<AffordanceGradient>,
+    grids: Publisher<AgpIpc, GradientGrid, ()>,
+    grids_wake: Notifier<AgpIpc>,
+    /// The seq of the last set of grids published (0: none yet).
     grids_seq: u64,
+    /// The tracker's gradient generation last published (online learning).
+    published_generation: u64,
+    /// The object's name, for what is said on stdout.
+    object: String,
     /// When this estimator started (CLOCK_MONOTONIC, ns): carried by every estimate, so a
     /// planner sees a restarted estimator.
     start_ns: u64,
@@ -336,7 +336,19 @@ impl Estimator {
             learner,
             report_seq: 0,
             finished: None,
+            grids: grids
+                .data
+                .publisher_builder()
+                .create()
+                .map_err(open_err("the grid publisher"))?,
+            grids_wake: grids
+                .event
+                .notifier_builder()
+                .create()
+                .map_err(open_err("the grid notifier"))?,
             grids_seq: 0,
+            published_generation: 0,
+            object: scenario.name.clone(),
             start_ns: monotonic_ns(),
             tracker: ObjectTracker::new(
                 &RobotDescription::epuck(),
@@ -363,20 +375,7 @@ impl Estimator {
         Ok(Self {
             waiter: Waiter::new(listener, WaitStrategy::from_env()),
             state,
-            grids: grids
-                .data
-                .publisher_builder()
-                .create()
-                .map_err(open_err("the grid publisher"))?,
-            grids_wake: grids
-                .event
-                .notifier_builder()
-                .create()
-                .map_err(open_err("the grid notifier"))?,
-            grids_seq: 0,
-            published_generation: 0,
             results: args.results.clone(),
-            object: scenario.name.clone(),
             save_failed: None,
             _node: node,
         })
@@ -398,7 +397,8 @@ impl Estimator {
             .reports
             .update_connections()
             .map_err(|e| anyhow!("cannot update the report connections: {e:?}"))?;
-        self.grids
+        self.state
+            .grids
             .update_connections()
             .map_err(|e| anyhow!("cannot update the grid connections: {e:?}"))
     }
@@ -410,69 +410,37 @@ impl Estimator {
         let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
         let _ = self.state.estimates_wake.notify();
         let _ = self.state.reports_wake.notify();
-        let _ = self.grids_wake.notify();
+        let _ = self.state.grids_wake.notify();
     }
 
     /// Publishes every grid of `gradient` (every [`GridKind`] of every alpha: one set), each
     /// written once straight into its loaned sample, and gives it to the tracker.
     fn publish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
-        self.grids_seq += 1;
-        publish_grids(&self.grids, gradient, self.grids_seq)?;
-        let _ = self.grids_wake.notify();
-        self.state.grids_seq = self.grids_seq;
-        if let Err(e) = self.state.tracker.set_gradient(gradient) {
+        let state = &mut self.state;
+        state.grids_seq += 1;
+        publish_grids(&state.grids, gradient, state.grids_seq)?;
+        let _ = state.grids_wake.notify();
+        if let Err(e) = state.tracker.set_gradient(gradient) {
             eprintln!(
                 "agp-estimator: the gradient of `{}` cannot locate the object in a task: {e}",
-                self.object
+                state.object
             );
         }
-        self.published_generation = self.state.tracker.gradient_generation();
-        Ok(())
-    }
-
-    /// Online learning: when the tracker learned a push since the last publication, its
-    /// gradient is published again as a new set (the next seq); the estimates carry the
-    /// new seq from the next frame on, which tells the planner.
-    fn republish_learned(&mut self) -> Result<()> {
-        let generation = self.state.tracker.gradient_generation();
-        if generation == self.published_generation {
-            return Ok(());
-        }
-        let Some(gradient) = self.state.tracker.gradient() else {
-            return Ok(());
-        };
-        self.grids_seq += 1;
-        publish_grids(&self.grids, gradient, self.grids_seq)?;
-        let _ = self.grids_wake.notify();
-        self.state.grids_seq = self.grids_seq;
-        let first = self.published_generation == 0;
-        self.published_generation = generation;
-        if first {
-            println!(
-                "agp-estimator: built the contact prior of `{}` from the first circling: grids seq {} published",
-                self.object, self.grids_seq
-            );
-            return Ok(());
-        }
-        println!(
-            "agp-estimator: learned a push online ({} since the gradient was given): grids seq {} published",
-            self.state.tracker.pushes_learned(),
-            self.grids_seq
-        );
+        state.published_generation = state.tracker.gradient_generation();
         Ok(())
     }
 
     /// Learning is done: publishes the grids, reports `Learned`, saves the AG file.
     fn finish(&mut self, gradient: &AffordanceGradient) -> Result<()> {
         self.publish(gradient)?;
-        let path = self.results.join(format!("{}.ag", self.object));
+        let path = self.results.join(format!("{}.ag", self.state.object));
         let saved = save(gradient, &path);
         let report = match &self.state.learner {
-            Some(l) => l.learned_report(self.grids_seq, saved.is_ok()),
+            Some(l) => l.learned_report(self.state.grids_seq, saved.is_ok()),
             None => LearnReport {
                 kind: LearnReportKind::Learned as u32,
                 valid: u32::from(saved.is_ok()),
-                grids_seq: self.grids_seq,
+                grids_seq: self.state.grids_seq,
                 ..LearnReport::default()
             },
         };
@@ -484,9 +452,9 @@ impl Estimator {
         self.report(report)?;
         println!(
             "agp-estimator: learned `{}`: {learned} trials learned, {rejected} rejected of {total}; {} grids published (seq {}); AG file {}",
-            self.object,
+            self.state.object,
             gradient.alphas_deg().count() * GridKind::ALL.len(),
-            self.grids_seq,
+            self.state.grids_seq,
             if saved.is_ok() {
                 path.display().to_string()
             } else {
@@ -602,6 +570,7 @@ impl State {
     /// (`tests/tests/pipeline_allocations.rs` counts).
     fn poll(&mut self) -> Result<bool> {
         let mut any = self.drain_events()?;
+        self.republish_learned()?;
         loop {
             let frame = {
                 let _in_iceoryx2 = alloc_count::enter(alloc_count::Region::Iceoryx2);
@@ -637,10 +606,47 @@ impl State {
                 let _in_learning = alloc_count::enter(alloc_count::Region::Work);
                 l.observe(&IrView::from(&frame));
             }
+            // Online learning: what the events before this frame taught goes out before
+            // the frame's estimate, which carries its seq (as the in-process world's
+            // estimate does): a planner that steps one frame after a circling plans the
+            // next push on what that circling taught.
+            self.republish_learned()?;
             self.acknowledge(&frame, received)?;
             alloc_count::message_done();
         }
         Ok(any)
+    }
+
+    /// Online learning: when the tracker learned a push (or built the prior) since the
+    /// last publication, its gradient is published again as a new set (the next seq),
+    /// before the estimate of the frame under way: that estimate and every later one carry
+    /// the new seq, which tells the planner. Allocates nothing but what is said on stdout.
+    fn republish_learned(&mut self) -> Result<()> {
+        let generation = self.tracker.gradient_generation();
+        if generation == self.published_generation {
+            return Ok(());
+        }
+        let Some(gradient) = self.tracker.gradient() else {
+            return Ok(());
+        };
+        self.grids_seq += 1;
+        publish_grids(&self.grids, gradient, self.grids_seq)?;
+        let _ = self.grids_wake.notify();
+        let first = self.published_generation == 0;
+        self.published_generation = generation;
+        if first {
+            println!(
+                "agp-estimator: built the contact prior of `{}` from the first circling: grids seq {} published",
+                self.object, self.grids_seq
+            );
+            return Ok(());
+        }
+        println!(
+            "agp-estimator: learned a push online ({} since the gradient was given): grids seq {} published",
+            self.tracker.pushes_learned(),
+            self.grids_seq
+        );
+        Ok(())
     }
 
     fn drain_events(&mut self) -> Result<bool> {

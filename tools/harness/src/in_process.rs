@@ -23,8 +23,6 @@ pub struct InProcessWorld {
     estimate: ObjectEstimate,
     /// The tracker's gradient generation the planner has (online learning).
     served_generation: u64,
-    /// The grids seq the next frame's estimate carries: the generation at the last frame.
-    grids_seq: u64,
 }
 
 impl InProcessWorld {
@@ -56,7 +54,6 @@ impl InProcessWorld {
             tracker,
             estimate: ObjectEstimate::default(),
             served_generation,
-            grids_seq: served_generation,
         };
         world.perceive();
         Ok(world)
@@ -70,12 +67,12 @@ impl InProcessWorld {
         self.estimate = ObjectEstimate {
             step: self.sim.step_count(),
             // The set the estimator would have published, one per gradient version: a
-            // version made at a frame (a circling's end) shows from the next frame, as
-            // the estimator publishes the grids after that frame's estimate.
-            grids_seq: self.grids_seq,
+            // version the events before this frame made (a circling's end) shows from
+            // this frame on, as the estimator publishes the grids before the frame's
+            // estimate.
+            grids_seq: self.tracker.gradient_generation(),
             ..ObjectEstimate::default()
         };
-        self.grids_seq = self.tracker.gradient_generation();
         self.tracker.write_estimate(&mut self.estimate);
     }
 
@@ -234,19 +231,39 @@ pub fn run_online_episode(
     task: &Task,
     config: &EpisodeConfig,
 ) -> Result<EpisodeResult, InProcessEpisodeError> {
+    run_online_episode_with(
+        scenario,
+        robot,
+        planner,
+        task,
+        config,
+        OnlineLearningConfig::updating(),
+        ContactPriorConfig::default(),
+    )
+}
+
+/// [`run_online_episode`] with the tracker's online learning and prior of `online` and
+/// `prior` (tuning: the estimator's are the defaults).
+pub fn run_online_episode_with(
+    scenario: &Scenario,
+    robot: &RobotDescription,
+    planner: PlannerKind,
+    task: &Task,
+    config: &EpisodeConfig,
+    online: OnlineLearningConfig,
+    prior: ContactPriorConfig,
+) -> Result<EpisodeResult, InProcessEpisodeError> {
     let sim = seeded_sim(scenario, robot, config.seed)?;
     let mut world = InProcessWorld::with_tracker(
         sim,
         robot,
         None,
         TrackerConfig {
-            online: OnlineLearningConfig::updating(),
+            online,
             ..TrackerConfig::default()
         },
     )?;
-    world
-        .tracker_mut()
-        .start_from_prior(&scenario.name, ContactPriorConfig::default());
+    world.tracker_mut().start_from_prior(&scenario.name, prior);
     let config = EpisodeConfig {
         await_gradient: true,
         ..config.clone()
