@@ -5,8 +5,9 @@
 //! its verdict the saved AG file), the placement task (lockstep, the estimator serving an
 //! AG file learned once by `agp bench learn` at the start, its verdict the judge's) and a
 //! live session on the realtime clock (the planner serving goals, `--mode serve`, pursuing
-//! one `agp goal`; its verdict the goal reached, or ended by the planner with its reason,
-//! then `agp down`). Then the bridge phase: placements split over two instances joined by
+//! one `agp goal`, queued again, as its user would, after its supervisor was killed and
+//! brought up again: the queue lives in the supervisor; its verdict the goal reached, or
+//! ended by the planner with its reason, then `agp down`). Then the bridge phase: placements split over two instances joined by
 //! `agp bridge` through a TCP proxy, with faults across the link (`kill -9` and SIGSTOP of
 //! the far bridge and of the far supervisor, the link cut then restored); their verdict the
 //! judge's, every step applied once (physics's step log) and no step applied while the link
@@ -626,10 +627,7 @@ impl Campaign {
             (Action::Kill, None) => {
                 let t0 = Instant::now();
                 let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
-                run.session.sup().signal(libc::SIGKILL);
-                run.session.sup().wait_exit(Duration::from_secs(10));
-                // Each child dies with its supervisor (PR_SET_PDEATHSIG).
-                let outlived = reap_children(&self.bins, &children, Duration::from_secs(10));
+                let outlived = kill_supervisor(&mut run.session, &self.bins, &children);
                 if outlived > 0 {
                     record.note = format!(
                         "{outlived} child(ren) outlived the killed supervisor (killed by the tool); "
@@ -639,9 +637,21 @@ impl Campaign {
                 record.note += &format!("{left} file(s) left by the dead supervisor; ");
                 run.session.up_again()?;
                 run.ups += 1;
-                run.wait_back(t0, timeout, "a new supervisor with every child", |r, s| {
-                    r.all_back(s)
-                })?
+                let back =
+                    run.wait_back(t0, timeout, "a new supervisor with every child", |r, s| {
+                        r.all_back(s)
+                    })?;
+                // A live session's goals lived in the dead supervisor: queue the goal again,
+                // as its user would after bringing the session back.
+                if run.phase == Phase::Live
+                    && matches!(back, Back::In(_))
+                    && let Err(e) = queue_goal(run)
+                {
+                    record.note += &format!("{e:#}; ");
+                    Back::Never("the goal could not be queued again".to_owned())
+                } else {
+                    back
+                }
             }
         };
         match back {
@@ -668,15 +678,33 @@ impl Campaign {
     /// SIGSTOP to `pid`, a random pause, SIGCONT; returns the moment of SIGCONT.
     fn pause(&mut self, run: &mut Run<'_>, pid: u32, record: &mut FaultRecord) -> Result<Instant> {
         let pause = Duration::from_secs_f64(self.rng.range(0.1, 2.0));
-        run.session.stopped = Some(pid);
-        signal(pid, libc::SIGSTOP);
-        let slept = sleep_checked(pause);
-        signal(pid, libc::SIGCONT);
-        run.session.stopped = None;
-        slept?;
+        pause_process(&mut run.session, pid, pause)?;
         record.pause_ms = Some(pause.as_secs_f64() * 1e3);
         Ok(Instant::now())
     }
+}
+
+/// SIGSTOP to `pid` (the supervisor of `session` or one of its children), `pause`, then
+/// SIGCONT, whatever the sleep ended with: the pid is `session.stopped` meanwhile, so a tool
+/// interrupted mid-pause continues it before it stops the session. Every phase's
+/// stop/continue fault is this.
+fn pause_process(session: &mut Session<'_>, pid: u32, pause: Duration) -> Result<()> {
+    session.stopped = Some(pid);
+    signal(pid, libc::SIGSTOP);
+    let slept = sleep_checked(pause);
+    signal(pid, libc::SIGCONT);
+    session.stopped = None;
+    slept
+}
+
+/// `kill -9` of the supervisor of `session`, whose children were `children`: each dies
+/// with it (PR_SET_PDEATHSIG); any that outlives it is killed by the tool and counted in
+/// what this returns. The caller then starts `agp up` again ([`Session::up_again`]), which
+/// must clean what the dead one left.
+fn kill_supervisor(session: &mut Session<'_>, bins: &Bins, children: &[u32]) -> usize {
+    session.sup().signal(libc::SIGKILL);
+    session.sup().wait_exit(Duration::from_secs(10));
+    reap_children(bins, children, Duration::from_secs(10))
 }
 
 /// The children a run of `phase` has: the live session's planner serves goals.
@@ -1162,6 +1190,44 @@ impl LinkRun<'_> {
         self.planner.ended() == Some(Some(0))
     }
 
+    /// A stop/continue fault of the far end, in both bridge phases: SIGSTOP of the far
+    /// bridge (`bridge`, [`LinkFault::StopFarBridge`]) or of the far supervisor
+    /// ([`LinkFault::StopFarSupervisor`]), `pause`, SIGCONT; the pause goes in `record`.
+    fn pause_far(
+        &mut self,
+        kind: LinkFault,
+        bridge: u32,
+        pause: Duration,
+        record: &mut LinkFaultRecord,
+    ) -> Result<()> {
+        let target = match kind {
+            LinkFault::StopFarBridge => bridge,
+            _ => self.planner.sup().pid(),
+        };
+        pause_process(&mut self.planner, target, pause)?;
+        record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+        Ok(())
+    }
+
+    /// `kill -9` of the far supervisor, whose children `before` shows, then `agp up` of the
+    /// planner's side again, in both bridge phases; a child that outlived it goes in
+    /// `record`'s note.
+    fn kill_far_supervisor(
+        &mut self,
+        bins: &Bins,
+        before: &Status,
+        record: &mut LinkFaultRecord,
+    ) -> Result<()> {
+        let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
+        let outlived = kill_supervisor(&mut self.planner, bins, &children);
+        if outlived > 0 {
+            record.note = format!("{outlived} child(ren) outlived the killed supervisor; ");
+        }
+        self.planner.up_again()?;
+        self.planner_ups += 1;
+        Ok(())
+    }
+
     /// Waits until the planner side shows `back` (if given), then until physics steps
     /// again; the time from `since`. `Ok(None)` when the placement ran out meanwhile.
     fn wait_steps(
@@ -1397,18 +1463,7 @@ impl<'a> LinkCampaign<'a> {
                 run.wait_steps(t0, timeout, Some(&restarted as &dyn Fn(&Status) -> bool))?
             }
             LinkFault::StopFarBridge | LinkFault::StopFarSupervisor => {
-                let target = if kind == LinkFault::StopFarBridge {
-                    pid
-                } else {
-                    run.planner.sup().pid()
-                };
-                run.planner.stopped = Some(target);
-                signal(target, libc::SIGSTOP);
-                let slept = sleep_checked(pause);
-                signal(target, libc::SIGCONT);
-                run.planner.stopped = None;
-                slept?;
-                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
+                run.pause_far(kind, pid, pause, &mut record)?;
                 run.wait_steps(
                     Instant::now(),
                     timeout,
@@ -1416,16 +1471,8 @@ impl<'a> LinkCampaign<'a> {
                 )?
             }
             LinkFault::KillFarSupervisor => {
-                let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
                 let t0 = Instant::now();
-                run.planner.sup().signal(libc::SIGKILL);
-                run.planner.sup().wait_exit(Duration::from_secs(10));
-                let outlived = reap_children(self.bins, &children, Duration::from_secs(10));
-                if outlived > 0 {
-                    record.note = format!("{outlived} child(ren) outlived the killed supervisor; ");
-                }
-                run.planner.up_again()?;
-                run.planner_ups += 1;
+                run.kill_far_supervisor(self.bins, &before, &mut record)?;
                 run.wait_steps(t0, timeout, Some(&all as &dyn Fn(&Status) -> bool))?
             }
             LinkFault::Cut => {
@@ -1990,31 +2037,12 @@ impl<'a> LinkCampaign<'a> {
                 run.wait_far_back(t0, timeout, &restarted)?
             }
             LinkFault::StopFarBridge | LinkFault::StopFarSupervisor => {
-                let target = if kind == LinkFault::StopFarBridge {
-                    pid
-                } else {
-                    run.planner.sup().pid()
-                };
-                run.planner.stopped = Some(target);
-                signal(target, libc::SIGSTOP);
-                let slept = sleep_checked(pause);
-                signal(target, libc::SIGCONT);
-                run.planner.stopped = None;
+                run.pause_far(kind, pid, pause, &mut record)?;
                 up_ns = Some(monotonic_ns());
-                slept?;
-                record.pause_ms = Some(pause.as_secs_f64() * 1e3);
                 run.wait_far_back(Instant::now(), timeout, &all)?
             }
             LinkFault::KillFarSupervisor => {
-                let children: Vec<u32> = before.processes.iter().filter_map(|p| p.pid).collect();
-                run.planner.sup().signal(libc::SIGKILL);
-                run.planner.sup().wait_exit(Duration::from_secs(10));
-                let outlived = reap_children(self.bins, &children, Duration::from_secs(10));
-                if outlived > 0 {
-                    record.note = format!("{outlived} child(ren) outlived the killed supervisor; ");
-                }
-                run.planner.up_again()?;
-                run.planner_ups += 1;
+                run.kill_far_supervisor(self.bins, &before, &mut record)?;
                 run.wait_far_back(t0, timeout, &all)?
             }
             LinkFault::Cut => {
