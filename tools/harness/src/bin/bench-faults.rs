@@ -2186,8 +2186,16 @@ impl<'a> LinkCampaign<'a> {
             .iter()
             .filter(|f| !f.survived || f.violation.is_some())
         {
+            // The violation and the run's notes, each a clause of its own.
+            let what: Vec<&str> = f
+                .violation
+                .as_deref()
+                .into_iter()
+                .chain(f.note.split("; ").map(str::trim))
+                .filter(|s| !s.is_empty())
+                .collect();
             println!(
-                "  {}: run {} at {:.1} s: {}: {}{}",
+                "  {}: run {} at {:.1} s: {}: {}",
                 if f.survived {
                     "VIOLATION"
                 } else {
@@ -2196,8 +2204,7 @@ impl<'a> LinkCampaign<'a> {
                 f.run,
                 f.at_s,
                 f.kind.label(),
-                f.violation.as_deref().unwrap_or_default(),
-                f.note
+                what.join("; ")
             );
         }
         for r in self
