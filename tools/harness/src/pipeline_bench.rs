@@ -176,14 +176,12 @@ impl Waiting {
     /// only then renamed into the queue, so a waiter that finds a `wait-` file it can lock
     /// knows its owner is gone.
     fn enter(dir: &Path, cost: u64, tag: &str) -> Result<Self> {
-        use std::os::fd::AsRawFd;
         let pid = std::process::id();
         let name = format!("wait-{cost:012}-{pid}-{tag}");
         let draft = dir.join(format!("draft-{pid}-{tag}"));
         let file = std::fs::File::create(&draft)
             .with_context(|| format!("cannot create {}", draft.display()))?;
-        // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
-        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        if !try_lock(&file) {
             bail!(
                 "cannot lock {}: {}",
                 draft.display(),
@@ -203,7 +201,6 @@ impl Waiting {
     /// Whether a live pipeline of more work (a larger name) waits in `dir`; the files of
     /// waiters that died are removed on the way.
     fn behind_another(&self, dir: &Path) -> Result<bool> {
-        use std::os::fd::AsRawFd;
         let entries =
             std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))?;
         for entry in entries.flatten() {
@@ -216,8 +213,7 @@ impl Waiting {
             let Ok(file) = std::fs::File::open(entry.path()) else {
                 continue;
             };
-            // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
-            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            if !try_lock(&file) {
                 return Ok(true);
             }
             // Its owner died waiting (or took its slot just now: then the name is gone).
@@ -234,13 +230,20 @@ impl Drop for Waiting {
     }
 }
 
+/// Takes an exclusive flock(2) on `file` without waiting: whether it got it. The lock lasts
+/// as long as the file stays open.
+fn try_lock(file: &std::fs::File) -> bool {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock(2) on a descriptor `file` owns and keeps open for the call.
+    unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
+}
+
 /// Waits until one of the slot files `slot-0`, `slot-1`, ... in `dir` can be locked and no
 /// live pipeline of more expected work (`cost`) waits for one; its number and the locked
 /// file. Longest first: the pipelines of a run sharing the slots (`agp bench paper
 /// --jobs N`) are scheduled by their expected work, so that no long one starts last and
 /// leaves the other cores idle while it ends. Gives up at a shutdown request.
 fn take_slot(dir: &Path, cost: u64, tag: &str) -> Result<(usize, std::fs::File)> {
-    use std::os::fd::AsRawFd;
     let mut count = 0;
     while dir.join(format!("slot-{count}")).is_file() {
         count += 1;
@@ -261,8 +264,7 @@ fn take_slot(dir: &Path, cost: u64, tag: &str) -> Result<(usize, std::fs::File)>
             let path = dir.join(format!("slot-{k}"));
             let file = std::fs::File::open(&path)
                 .with_context(|| format!("cannot open the slot file {}", path.display()))?;
-            // SAFETY: flock(2) on a descriptor this function owns; the lock goes with it.
-            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            if try_lock(&file) {
                 return Ok((k, file));
             }
         }
